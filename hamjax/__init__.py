@@ -1,0 +1,46 @@
+"""hamjax: identification of Hammerstein systems with hard input nonlinearities."""
+
+from ._results import RESULTS as RESULTS
+from ._x64 import enable_x64 as enable_x64
+from .models import (
+    AbstractContinuousLinearBlock as AbstractContinuousLinearBlock,
+    AbstractDiscreteLinearBlock as AbstractDiscreteLinearBlock,
+    AbstractHysteresisNonlinearity as AbstractHysteresisNonlinearity,
+    AbstractLinearBlock as AbstractLinearBlock,
+    AbstractNoise as AbstractNoise,
+    AbstractNonlinearity as AbstractNonlinearity,
+    AbstractStaticNonlinearity as AbstractStaticNonlinearity,
+    AR1Noise as AR1Noise,
+    Backlash as Backlash,
+    ContinuousTransferFunction as ContinuousTransferFunction,
+    DeadZone as DeadZone,
+    DiscreteStateSpace as DiscreteStateSpace,
+    DiscreteTransferFunction as DiscreteTransferFunction,
+    Hammerstein as Hammerstein,
+    Identity as Identity,
+    PiecewiseLinear as PiecewiseLinear,
+    Saturation as Saturation,
+    Scaled as Scaled,
+    Shifted as Shifted,
+    Tabulated as Tabulated,
+    WhiteNoise as WhiteNoise,
+    add_noise as add_noise,
+    apply_nonlinearity as apply_nonlinearity,
+    noise_std_for_snr as noise_std_for_snr,
+    normalise_static_gain as normalise_static_gain,
+)
+from .signals import (
+    fgi_period_samples as fgi_period_samples,
+    initialisation_step as initialisation_step,
+    multisine as multisine,
+    nbbi_staircase as nbbi_staircase,
+    pe_impulse_sequence as pe_impulse_sequence,
+    periodic_staircase as periodic_staircase,
+    prbs as prbs,
+    random_staircase as random_staircase,
+)
+from .simulation import (
+    linear_response as linear_response,
+    simulate as simulate,
+    simulate_diffrax as simulate_diffrax,
+)

@@ -1,0 +1,80 @@
+"""The `hamjax` command: subcommands are registered by the modules in `_COMMANDS`."""
+
+import argparse
+import importlib
+import sys
+import traceback
+
+
+# name -> module that defines `register(subparsers)`; each module's `run(args)` is
+# set as the subparser's `func` default. Imported lazily so `hamjax --help` is fast.
+_COMMANDS = {
+    "demo": "hamjax.cli.demo",
+    "simulate": "hamjax.cli.simulate",
+    "experiment": "hamjax.cli.experiment",
+    "identify": "hamjax.cli.identify",
+    "reproduce": "hamjax.cli.reproduce",
+    "study": "hamjax.cli.study",
+    "diagnose": "hamjax.cli.diagnose",
+    "blind": "hamjax.cli.blind",
+}
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):  # argparse's own usage errors: exit 2, no traceback
+        self.print_usage(sys.stderr)
+        print(f"hamjax: error: {message}", file=sys.stderr)
+        raise SystemExit(2)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(
+        prog="hamjax",
+        description="Identify Hammerstein systems with hard input nonlinearities "
+        "and diagnose sim-to-real gaps.",
+    )
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    sub.required = True
+    for name, module in _COMMANDS.items():
+        try:
+            mod = importlib.import_module(module)
+        except ModuleNotFoundError as err:
+            if err.name == module:
+                continue  # not built yet
+            raise
+        mod.register(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the console script and of `python -m hamjax`."""
+    from .._errors import UserInputError
+    from .._x64 import enable_x64
+
+    enable_x64()
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        result = args.func(args)
+    except (UserInputError, ValueError, FileNotFoundError, NotADirectoryError) as err:
+        if isinstance(err, ValueError) and not isinstance(err, UserInputError):
+            # A ValueError raised by our validation names the problem; a debug
+            # environment variable shows the traceback for bug reports.
+            if _debug():
+                traceback.print_exc()
+        print(f"hamjax: error: {err}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("hamjax: interrupted; results already written are kept", file=sys.stderr)
+        return 130
+    return int(result or 0)
+
+
+def _debug() -> bool:
+    import os
+
+    return bool(os.environ.get("HAMJAX_DEBUG"))
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,63 @@
+"""Discrete state-space block $x_{k+1} = A x_k + B u_k$, $y_k = C x_k + D u_k$."""
+
+import equinox as eqx
+import jax.lax as lax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, ArrayLike, Float
+
+from ..._checks import concrete
+from ..._types import Signal
+from ._base import AbstractDiscreteLinearBlock
+
+
+class DiscreteStateSpace(AbstractDiscreteLinearBlock):
+    """Single-input single-output discrete state space, from rest ($x_0 = 0$)."""
+
+    A: Float[Array, "n n"]
+    B: Float[Array, "n 1"]
+    C: Float[Array, "1 n"]
+    D: Float[Array, "1 1"]
+    dt: float | None = eqx.field(static=True, default=None)
+
+    def __init__(self, A: ArrayLike, B: ArrayLike, C: ArrayLike, D: ArrayLike, dt=None):
+        self.A = jnp.asarray(A, dtype=float)
+        self.B = jnp.asarray(B, dtype=float).reshape(-1, 1)
+        self.C = jnp.asarray(C, dtype=float).reshape(1, -1)
+        self.D = jnp.asarray(D, dtype=float).reshape(1, 1)
+        self.dt = None if dt is None else float(dt)
+
+    def __check_init__(self):
+        n = self.A.shape[0]
+        if self.A.shape != (n, n) or self.B.shape != (n, 1) or self.C.shape != (1, n):
+            raise ValueError(
+                f"inconsistent state-space shapes A{self.A.shape} B{self.B.shape} "
+                f"C{self.C.shape}"
+            )
+
+    def static_gain(self) -> Float[Array, ""]:
+        n = self.A.shape[0]
+        x = jnp.linalg.solve(jnp.eye(n) - self.A, self.B)
+        return (self.C @ x + self.D)[0, 0]
+
+    def poles(self) -> np.ndarray:
+        A = concrete(self.A)
+        if A is None:
+            raise ValueError("poles need concrete matrices (not under jit)")
+        return np.linalg.eigvals(A)
+
+    def is_stable(self) -> bool:
+        return bool(np.all(np.abs(self.poles()) < 1.0))
+
+    def scaled(self, gain) -> "DiscreteStateSpace":
+        return DiscreteStateSpace(self.A, self.B, self.C * gain, self.D * gain, self.dt)
+
+    def response(self, u: Signal) -> Signal:
+        """Output from rest for the input samples `u`."""
+        A, B, c, d = self.A, self.B[:, 0], self.C[0], self.D[0, 0]
+
+        def step(x, uk):
+            return A @ x + B * uk, c @ x + d * uk
+
+        _, y = lax.scan(step, jnp.zeros(A.shape[0], u.dtype), u)
+        return y

@@ -1,0 +1,73 @@
+"""Two-segment piecewise-linear map with preload and dead zone (seed 001, Fig. 2)."""
+
+import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike, Float
+
+from ..._checks import concrete
+from ._base import AbstractStaticNonlinearity
+
+
+class PiecewiseLinear(AbstractStaticNonlinearity):
+    r"""The seed-001 nonlinearity of Fig. 2, in the signed convention:
+
+    $$F(v) = \begin{cases} k_1 (v - d_1) + l_1 & v > d_1 \\
+    0 & d_2 \le v \le d_1 \\ k_2 (v - d_2) + l_2 & v < d_2 \end{cases}$$
+
+    with $d_2 \le 0 \le d_1$. A dead zone has $l_1 = l_2 = 0$; a preload has
+    $d_1 = d_2 = 0$ and jumps $l_1 > 0 > l_2$ at the origin.
+
+    ```python
+    >>> F = PiecewiseLinear(k1=1.0, k2=2.0, d1=1.0, d2=-2.0, l1=1.0, l2=-2.0)
+    >>> F(jnp.array([-6.0, -3.0, 0.0, 3.0, 6.0]))
+    Array([-10.,  -4.,   0.,   3.,   6.], dtype=float64)
+    ```
+    """
+
+    k1: Float[Array, ""]
+    k2: Float[Array, ""]
+    d1: Float[Array, ""]
+    d2: Float[Array, ""]
+    l1: Float[Array, ""]
+    l2: Float[Array, ""]
+
+    def __init__(
+        self,
+        *,
+        k1: Float[ArrayLike, ""],
+        k2: Float[ArrayLike, ""],
+        d1: Float[ArrayLike, ""] = 0.0,
+        d2: Float[ArrayLike, ""] = 0.0,
+        l1: Float[ArrayLike, ""] = 0.0,
+        l2: Float[ArrayLike, ""] = 0.0,
+    ):
+        self.k1, self.k2, self.d1, self.d2, self.l1, self.l2 = (
+            jnp.asarray(x, dtype=float) for x in (k1, k2, d1, d2, l1, l2)
+        )
+
+    def __check_init__(self):
+        for name in ("k1", "k2", "d1", "d2", "l1", "l2"):
+            if jnp.shape(getattr(self, name)) != ():
+                raise ValueError(f"PiecewiseLinear.{name} must be a scalar")
+        d1, d2 = concrete(self.d1), concrete(self.d2)
+        if d1 is not None and d2 is not None and (d2 > 0.0 or d1 < 0.0):
+            raise ValueError(
+                "PiecewiseLinear needs d2 <= 0 <= d1 (seed 001, Fig. 2); got "
+                f"d1={float(d1)}, d2={float(d2)}"
+            )
+
+    def __call__(self, v: Float[Array, "*shape"]) -> Float[Array, "*shape"]:
+        upper = self.k1 * (v - self.d1) + self.l1
+        lower = self.k2 * (v - self.d2) + self.l2
+        return jnp.where(v > self.d1, upper, jnp.where(v < self.d2, lower, 0.0))
+
+    @property
+    def dead_zone_width(self) -> Float[Array, ""]:
+        """$d_1 - d_2$."""
+        return self.d1 - self.d2
+
+    def replace(self, **kwargs) -> "PiecewiseLinear":
+        """A copy with some of `k1, k2, d1, d2, l1, l2` changed."""
+        fields = {n: getattr(self, n) for n in ("k1", "k2", "d1", "d2", "l1", "l2")}
+        fields.update(kwargs)
+        return PiecewiseLinear(**fields)
+

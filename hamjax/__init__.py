@@ -18,6 +18,7 @@ from .models import (
     DiscreteTransferFunction as DiscreteTransferFunction,
     Hammerstein as Hammerstein,
     Identity as Identity,
+    OutputScaled as OutputScaled,
     PiecewiseLinear as PiecewiseLinear,
     Saturation as Saturation,
     Scaled as Scaled,

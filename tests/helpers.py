@@ -11,3 +11,42 @@ def tree_allclose(x, y, *, rtol=1e-10, atol=1e-12) -> bool:
     if tx != ty:
         return False
     return all(np.allclose(a, b, rtol=rtol, atol=atol) for a, b in zip(lx, ly))
+
+
+def reference_backlash(v, f_a, f_d, u0) -> np.ndarray:
+    """The play operator of `../shared/tools/contract_check.py`, in plain NumPy:
+    rising `u = max(u, f_a(v))`, falling `u = min(u, f_d(v))` (monotone borders)."""
+    v = np.asarray(v, dtype=float)
+    out, prev_v, u = np.empty(len(v)), v[0], float(u0)
+    for k, x in enumerate(v):
+        if x > prev_v:
+            u = max(u, float(f_a(x)))
+        elif x < prev_v:
+            u = min(u, float(f_d(x)))
+        out[k], prev_v = u, x
+    return out
+
+
+def reference_zoh(num, den, u, dt) -> np.ndarray:
+    """Exact zero-order-hold response from rest by `scipy.signal.cont2discrete` and
+    `dlsim` (an implementation independent of hamjax's matrix exponential)."""
+    from scipy import signal
+
+    numd, dend, _ = signal.cont2discrete(
+        (np.asarray(num, float), np.asarray(den, float)), dt, method="zoh"
+    )
+    _, y = signal.dlsim((np.ravel(numd), dend, dt), np.asarray(u, float))
+    return np.ravel(y)
+
+
+def random_stable_poly(rng_values, radius: float = 0.95) -> np.ndarray:
+    """Monic polynomial in q^-1 whose roots are `radius * x` for values in [-1, 1]
+    taken in pairs (a complex pair per two values, a real root for an odd one)."""
+    x = list(rng_values)
+    roots = []
+    while len(x) >= 2:
+        r, phi = abs(x.pop()) * radius, x.pop() * np.pi
+        roots += [r * np.exp(1j * phi), r * np.exp(-1j * phi)]
+    if x:
+        roots.append(x.pop() * radius)
+    return np.real(np.poly(roots)) if roots else np.ones(1)

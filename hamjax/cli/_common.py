@@ -41,11 +41,16 @@ def positive_int(text: str) -> int:
 
 
 def add_seed(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--seed", type=int, default=0, help="root random seed (default 0)")
+    parser.add_argument(
+        "--seed", type=int, default=0, help="root random seed (default 0)"
+    )
 
 
 def add_out(parser: argparse.ArgumentParser, default: str | None = None) -> None:
     parser.add_argument(
-        "--out", type=Path, default=None if default is None else Path(default),
-        required=default is None, help="output folder",
+        "--out",
+        type=Path,
+        default=None if default is None else Path(default),
+        required=default is None,
+        help="output folder",
     )

@@ -28,7 +28,9 @@ METHODS = {
 
 def register_method_commands(sub, verb: str, help: str) -> None:
     parser = sub.add_parser(verb, help=help)
-    methods = parser.add_subparsers(dest="method", metavar="METHOD", parser_class=type(parser))
+    methods = parser.add_subparsers(
+        dest="method", metavar="METHOD", parser_class=type(parser)
+    )
     methods.required = True
     for name, module in METHODS[verb].items():
         try:

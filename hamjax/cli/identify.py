@@ -4,4 +4,6 @@ from ._methods import register_method_commands
 
 
 def register(sub) -> None:
-    register_method_commands(sub, "identify", "identify from a measured experiment folder")
+    register_method_commands(
+        sub, "identify", "identify from a measured experiment folder"
+    )

@@ -35,7 +35,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     sub.required = True
-    for name, module in _COMMANDS.items():
+    for module in _COMMANDS.values():
         try:
             mod = importlib.import_module(module)
         except ModuleNotFoundError as err:

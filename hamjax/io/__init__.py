@@ -1,0 +1,16 @@
+from .csv import (
+    read_csv as read_csv,
+    sampling_period as sampling_period,
+    write_csv as write_csv,
+)
+from .files import (
+    atomic_write_text as atomic_write_text,
+    read_json as read_json,
+    write_json as write_json,
+)
+from .model_json import (
+    linear_from_dict as linear_from_dict,
+    load_model as load_model,
+    model_to_dict as model_to_dict,
+    nonlinearity_from_dict as nonlinearity_from_dict,
+)

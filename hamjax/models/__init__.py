@@ -26,6 +26,7 @@ from .nonlinearities import (
     BacklashState as BacklashState,
     DeadZone as DeadZone,
     Identity as Identity,
+    OutputScaled as OutputScaled,
     PiecewiseLinear as PiecewiseLinear,
     Saturation as Saturation,
     Scaled as Scaled,

@@ -6,10 +6,12 @@ from jaxtyping import Array, Float
 from .._checks import concrete
 from .linear import AbstractLinearBlock
 from .nonlinearities import (
+    AbstractHysteresisNonlinearity,
     AbstractNonlinearity,
     AbstractStaticNonlinearity,
     Backlash,
 )
+from .nonlinearities.output_scaled import OutputScaled
 from .nonlinearities.scaled import Scaled
 
 
@@ -34,13 +36,17 @@ class Hammerstein(eqx.Module):
 
 def scale_nonlinearity(nonlinearity: AbstractNonlinearity, gain) -> AbstractNonlinearity:
     """$k F$: the nonlinearity with its output multiplied by `gain`."""
-    if isinstance(nonlinearity, Backlash):
+    value = concrete(gain)
+    if isinstance(nonlinearity, Backlash) and value is not None and value > 0:
+        # A positive gain keeps it a Backlash (tabulatable, borders in output units).
         u0 = None if nonlinearity.u0 is None else nonlinearity.u0 * gain
         return Backlash(
             ascending=Scaled(inner=nonlinearity.ascending, gain=gain),
             descending=Scaled(inner=nonlinearity.descending, gain=gain),
             u0=u0,
         )
+    if isinstance(nonlinearity, AbstractHysteresisNonlinearity):
+        return OutputScaled(inner=nonlinearity, gain=gain)
     if isinstance(nonlinearity, AbstractStaticNonlinearity):
         return Scaled(inner=nonlinearity, gain=gain)
     raise TypeError(f"cannot scale a {type(nonlinearity).__name__}")

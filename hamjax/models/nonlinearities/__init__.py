@@ -7,8 +7,9 @@ from ._base import (
 from .backlash import Backlash as Backlash, BacklashState as BacklashState
 from .dead_zone import DeadZone as DeadZone
 from .identity import Identity as Identity
+from .output_scaled import OutputScaled as OutputScaled
 from .piecewise_linear import PiecewiseLinear as PiecewiseLinear
 from .saturation import Saturation as Saturation
+from .scaled import Scaled as Scaled
 from .shifted import Shifted as Shifted
 from .tabulated import Tabulated as Tabulated
-from .scaled import Scaled as Scaled

@@ -1,0 +1,64 @@
+"""Atomic writes and JSON reading with errors that name the file."""
+
+import json
+import os
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .._errors import UserInputError
+
+
+def atomic_write_text(path: str | os.PathLike, text: str) -> None:
+    """Write `text` to `path` through a temporary file and a rename."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w") as f:
+            f.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+def _to_jsonable(obj: Any) -> Any:
+    if isinstance(obj, dict):
+        return {str(k): _to_jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_to_jsonable(v) for v in obj]
+    if isinstance(obj, Path):
+        return str(obj)
+    if hasattr(obj, "__array__") and not isinstance(obj, str | bytes):
+        arr = np.asarray(obj)
+        return _to_jsonable(arr.tolist()) if arr.ndim else _to_jsonable(arr.item())
+    if isinstance(obj, float) and not np.isfinite(obj):
+        return None  # JSON has no NaN/inf; null is the portable spelling
+    if isinstance(obj, np.generic):
+        return _to_jsonable(obj.item())
+    return obj
+
+
+def write_json(path: str | os.PathLike, obj: Any) -> None:
+    """Write `obj` (arrays allowed; NaN/inf become null) as indented JSON, atomically."""
+    atomic_write_text(path, json.dumps(_to_jsonable(obj), indent=2) + "\n")
+
+
+def read_json(path: str | os.PathLike) -> dict:
+    """Read a JSON object; `UserInputError` naming the file if missing or malformed."""
+    path = Path(path)
+    if not path.is_file():
+        raise UserInputError(f"{path}: file not found")
+    try:
+        obj = json.loads(path.read_text())
+    except json.JSONDecodeError as err:
+        raise UserInputError(
+            f"{path}: not valid JSON ({err.msg}, line {err.lineno})"
+        ) from None
+    if not isinstance(obj, dict):
+        raise UserInputError(f"{path}: expected a JSON object at the top level")
+    return obj

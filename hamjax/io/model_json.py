@@ -1,0 +1,208 @@
+"""The `model.json` schema of `contracts/gap-case.md`: load into Modules and back."""
+
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .._errors import UserInputError
+from ..models import (
+    Backlash,
+    ContinuousTransferFunction,
+    DiscreteTransferFunction,
+    Hammerstein,
+    Identity,
+    PiecewiseLinear,
+    Scaled,
+    Shifted,
+    Tabulated,
+)
+from .files import read_json
+
+
+_NL_KINDS = ("identity", "piecewise_linear", "tabulated", "backlash")
+_LIN_KINDS = ("discrete_tf", "continuous_tf")
+
+
+def _number(where: str, obj: dict, key: str) -> float:
+    if key not in obj:
+        raise UserInputError(f"{where}: missing field {key!r}")
+    x = obj[key]
+    if isinstance(x, bool) or not isinstance(x, int | float) or not np.isfinite(x):
+        raise UserInputError(
+            f"{where}: field {key!r} must be a finite number; got {x!r}"
+        )
+    return float(x)
+
+
+def _numbers(where: str, obj: dict, key: str, *, min_len: int = 1) -> np.ndarray:
+    if key not in obj:
+        raise UserInputError(f"{where}: missing field {key!r}")
+    x = obj[key]
+    if not isinstance(x, list) or not all(
+        isinstance(e, int | float) and not isinstance(e, bool) for e in x
+    ):
+        raise UserInputError(
+            f"{where}: field {key!r} must be a list of numbers; got {x!r}"
+        )
+    arr = np.asarray(x, dtype=float)
+    if arr.shape[0] < min_len:
+        raise UserInputError(f"{where}: field {key!r} needs at least {min_len} numbers")
+    if not np.all(np.isfinite(arr)):
+        raise UserInputError(f"{where}: field {key!r} has non-finite numbers")
+    return arr
+
+
+def _kind(where: str, obj: Any, allowed: tuple[str, ...]) -> str:
+    if not isinstance(obj, dict):
+        raise UserInputError(f"{where}: must be a JSON object")
+    kind = obj.get("kind")
+    if kind not in allowed:
+        raise UserInputError(
+            f"{where}: unknown kind {kind!r} (expected one of {', '.join(allowed)})"
+        )
+    return kind
+
+
+def nonlinearity_from_dict(obj: dict, where: str = "nonlinearity"):
+    """Build a nonlinearity Module from its `model.json` dict."""
+    kind = _kind(where, obj, _NL_KINDS)
+    try:
+        if kind == "identity":
+            return Identity()
+        if kind == "piecewise_linear":
+            p = {
+                k: _number(where, obj, k) for k in ("k1", "k2", "d1", "d2", "l1", "l2")
+            }
+            return PiecewiseLinear(**p)
+        if kind == "tabulated":
+            return Tabulated(
+                _numbers(where, obj, "v", min_len=2),
+                _numbers(where, obj, "u", min_len=2),
+            )
+        v = _numbers(where, obj, "v", min_len=2)
+        return Backlash.from_table(
+            v,
+            _numbers(where, obj, "ascending", min_len=2),
+            _numbers(where, obj, "descending", min_len=2),
+        )
+    except ValueError as err:
+        if isinstance(err, UserInputError):
+            raise
+        raise UserInputError(f"{where}: {err}") from None
+
+
+def linear_from_dict(obj: dict, where: str = "linear"):
+    """Build a linear block from its `model.json` dict; returns `(block, dt or None)`."""
+    kind = _kind(where, obj, _LIN_KINDS)
+    try:
+        if kind == "discrete_tf":
+            dt = _number(where, obj, "dt") if "dt" in obj else None
+            return DiscreteTransferFunction(
+                _numbers(where, obj, "b"), _numbers(where, obj, "a"), dt
+            ), dt
+        return ContinuousTransferFunction(
+            _numbers(where, obj, "num"), _numbers(where, obj, "den")
+        ), None
+    except ValueError as err:
+        if isinstance(err, UserInputError):
+            raise
+        raise UserInputError(f"{where}: {err}") from None
+
+
+def load_model(source: str | os.PathLike | dict) -> tuple[Hammerstein, float | None]:
+    """Read a nominal model (a `model.json` path or its parsed dict).
+
+    **Returns:** `(plant, dt)` where `dt` is the discrete block's sampling period
+    (None for a continuous block, whose `dt` comes from the data).
+
+    **Raises:** `UserInputError` naming the file and the field at fault.
+    """
+    if isinstance(source, dict):
+        obj, name = source, "model"
+    else:
+        obj, name = read_json(source), str(Path(source))
+    for key in ("nonlinearity", "linear"):
+        if key not in obj:
+            raise UserInputError(f"{name}: missing {key!r}")
+    nl = nonlinearity_from_dict(obj["nonlinearity"], f"{name}: nonlinearity")
+    lin, dt = linear_from_dict(obj["linear"], f"{name}: linear")
+    return Hammerstein(nl, lin), dt
+
+
+def _static_to_dict(nl) -> dict:
+    if isinstance(nl, Identity):
+        return {"kind": "identity"}
+    if isinstance(nl, PiecewiseLinear):
+        return {
+            "kind": "piecewise_linear",
+            **{k: float(getattr(nl, k)) for k in ("k1", "k2", "d1", "d2", "l1", "l2")},
+        }
+    if isinstance(nl, Tabulated):
+        return {
+            "kind": "tabulated",
+            "v": np.asarray(nl.v).tolist(),
+            "u": np.asarray(nl.u).tolist(),
+        }
+    raise ValueError(f"{type(nl).__name__} has no model.json form")
+
+
+def model_to_dict(plant: Hammerstein, dt: float | None = None, *, grid=None) -> dict:
+    """The `model.json` dict of `plant`. A backlash whose borders are not tables is
+    tabulated on `grid` (required then); scaled/shifted maps are tabulated likewise.
+    """
+    nl = plant.nonlinearity
+    if isinstance(nl, Backlash):
+        asc, desc = nl.ascending, nl.descending
+        if (
+            isinstance(asc, Tabulated)
+            and isinstance(desc, Tabulated)
+            and np.array_equal(asc.v, desc.v)
+        ):
+            grid_, a_vals, d_vals = (
+                np.asarray(asc.v),
+                np.asarray(asc.u),
+                np.asarray(desc.u),
+            )
+        elif grid is None:
+            raise ValueError("a backlash with non-tabulated borders needs `grid`")
+        else:
+            grid_ = np.asarray(grid, float)
+            a_vals, d_vals = np.asarray(asc(grid_)), np.asarray(desc(grid_))
+        nl_dict = {
+            "kind": "backlash",
+            "v": grid_.tolist(),
+            "ascending": a_vals.tolist(),
+            "descending": d_vals.tolist(),
+        }
+    elif isinstance(nl, Scaled | Shifted):
+        if grid is None:
+            raise ValueError(f"a {type(nl).__name__} map needs `grid` to be tabulated")
+        grid_ = np.asarray(grid, float)
+        nl_dict = {
+            "kind": "tabulated",
+            "v": grid_.tolist(),
+            "u": np.asarray(nl(grid_)).tolist(),
+        }
+    else:
+        nl_dict = _static_to_dict(nl)
+    lin = plant.linear
+    if isinstance(lin, DiscreteTransferFunction):
+        lin_dict = {
+            "kind": "discrete_tf",
+            "b": np.asarray(lin.b).tolist(),
+            "a": np.asarray(lin.a).tolist(),
+        }
+        dt = lin.dt if dt is None else dt
+        if dt is not None:
+            lin_dict["dt"] = float(dt)
+    elif isinstance(lin, ContinuousTransferFunction):
+        lin_dict = {
+            "kind": "continuous_tf",
+            "num": np.asarray(lin.num).tolist(),
+            "den": np.asarray(lin.den).tolist(),
+        }
+    else:
+        raise ValueError(f"{type(lin).__name__} has no model.json form")
+    return {"nonlinearity": nl_dict, "linear": lin_dict}

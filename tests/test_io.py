@@ -1,0 +1,184 @@
+"""The file contracts: signal CSVs and model.json (contracts/gap-case.md)."""
+
+import json
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from scipy import signal
+
+import hamjax as hj
+from hamjax._errors import UserInputError
+from hamjax.io import (
+    load_model,
+    model_to_dict,
+    read_csv,
+    read_json,
+    write_csv,
+    write_json,
+)
+
+
+def _write(path, text):
+    path.write_text(text)
+    return path
+
+
+def test_csv_round_trip_is_exact(tmp_path):
+    rng = np.random.default_rng(0)
+    cols = {
+        "t": np.arange(50) * 0.1,
+        "v": rng.normal(size=50),
+        "y": rng.normal(size=50),
+    }
+    write_csv(tmp_path / "d.csv", cols)
+    back = read_csv(tmp_path / "d.csv")
+    for k in cols:
+        np.testing.assert_array_equal(back[k], cols[k])  # %.17g round-trips float64
+
+
+def test_csv_extra_columns_are_kept_and_ignored(tmp_path):
+    p = _write(tmp_path / "d.csv", "t,v,y,z\n0,1,2,3\n1,1,2,3\n")
+    assert set(read_csv(p)) == {"t", "v", "y", "z"}
+
+
+@pytest.mark.parametrize(
+    "text, match",
+    [
+        ("t,v\n0,1\n1,2\n", "missing column.*y"),
+        ("t,v,y\n0,1,nan\n1,2,3\n", "column y has NaN"),
+        ("t,v,y\n0,1,inf\n1,2,3\n", "column y has inf"),
+        ("t,v,y\n0,1,2\n1,2,3\n3,1,1\n", "not uniformly sampled"),
+        ("t,v,y\n0,1,2\n0,2,3\n", "strictly increasing"),
+        ("t,v,y\n0,1,x\n1,2,3\n", "malformed numbers"),
+        ("t,v,y\n0,1,2\n", "at least 2 rows"),
+        ("", "empty file"),
+    ],
+)
+def test_csv_errors_name_the_file_and_the_problem(tmp_path, text, match):
+    p = _write(tmp_path / "bad.csv", text)
+    with pytest.raises(UserInputError, match=match) as info:
+        read_csv(p)
+    assert "bad.csv" in str(info.value)
+
+
+def test_json_round_trip_and_nan_to_null(tmp_path):
+    write_json(tmp_path / "r.json", {"a": np.array([1.0, 2.0]), "b": float("nan")})
+    assert read_json(tmp_path / "r.json") == {"a": [1.0, 2.0], "b": None}
+    _write(tmp_path / "bad.json", "{not json")
+    with pytest.raises(UserInputError, match="bad.json: not valid JSON"):
+        read_json(tmp_path / "bad.json")
+
+
+MODELS = [
+    {
+        "nonlinearity": {
+            "kind": "piecewise_linear",
+            "k1": 1.0,
+            "k2": 2.0,
+            "d1": 1.0,
+            "d2": -2.0,
+            "l1": 1.0,
+            "l2": -2.0,
+        },
+        "linear": {
+            "kind": "discrete_tf",
+            "b": [0.0, 1.0, -2.0],
+            "a": [1.0, -1.5, 0.56],
+            "dt": 1.0,
+        },
+    },
+    {
+        "nonlinearity": {
+            "kind": "tabulated",
+            "v": [-1.0, 0.0, 2.0],
+            "u": [-2.0, 0.0, 1.0],
+        },
+        "linear": {"kind": "continuous_tf", "num": [1.0], "den": [0.25, 1.0, 1.0]},
+    },
+    {
+        "nonlinearity": {
+            "kind": "backlash",
+            "v": [-2.0, 2.0],
+            "ascending": [-2.2, 1.8],
+            "descending": [-1.8, 2.2],
+        },
+        "linear": {"kind": "discrete_tf", "b": [0.0, 0.3], "a": [1.0, -0.7], "dt": 0.1},
+    },
+    {
+        "nonlinearity": {"kind": "identity"},
+        "linear": {"kind": "discrete_tf", "b": [0.5], "a": [1.0]},
+    },
+]
+
+
+@pytest.mark.parametrize("model", MODELS)
+def test_model_json_round_trip(model):
+    plant, dt = load_model(model)
+    assert model_to_dict(plant, dt) == model
+
+
+def test_loaded_model_simulates_like_scipy():
+    # The contract's piecewise-linear map and B/A, against lfilter on a numpy map.
+    plant, _ = load_model(MODELS[0])
+    v = np.random.default_rng(1).uniform(-8, 8, 200)
+    F = np.where(v > 1, (v - 1) + 1, np.where(v < -2, 2 * (v + 2) - 2, 0.0))
+    want = signal.lfilter([0, 1.0, -2.0], [1, -1.5, 0.56], F)
+    np.testing.assert_allclose(
+        hj.simulate(plant, jnp.asarray(v)), want, rtol=1e-12, atol=1e-12
+    )
+
+
+@pytest.mark.parametrize(
+    "change, match",
+    [
+        ({"nonlinearity": {"kind": "spline"}}, "unknown kind 'spline'"),
+        (
+            {"linear": {"kind": "discrete_tf", "b": [1.0], "a": [2.0, 1.0]}},
+            "a\\[0\\] must be 1",
+        ),
+        (
+            {"linear": {"kind": "discrete_tf", "b": "x", "a": [1.0]}},
+            "'b' must be a list",
+        ),
+        (
+            {
+                "linear": {
+                    "kind": "continuous_tf",
+                    "num": [1.0, 1.0, 1.0],
+                    "den": [1.0, 1.0],
+                }
+            },
+            "proper",
+        ),
+        (
+            {
+                "nonlinearity": {
+                    "kind": "piecewise_linear",
+                    "k1": 1.0,
+                    "k2": 1.0,
+                    "d1": -1.0,
+                    "d2": 0.0,
+                    "l1": 0.0,
+                    "l2": 0.0,
+                }
+            },
+            "d2 <= 0 <= d1",
+        ),
+        (
+            {"nonlinearity": {"kind": "piecewise_linear", "k1": "one"}},
+            "'k1' must be a finite",
+        ),
+        (
+            {"nonlinearity": {"kind": "tabulated", "v": [0.0, 0.0], "u": [1.0, 2.0]}},
+            "strictly increasing",
+        ),
+    ],
+)
+def test_malformed_model_json_is_a_clear_error(tmp_path, change, match):
+    model = {**MODELS[0], **change}
+    path = tmp_path / "model.json"
+    path.write_text(json.dumps(model))
+    with pytest.raises(UserInputError, match=match) as info:
+        load_model(path)
+    assert "model.json" in str(info.value)

@@ -1,0 +1,228 @@
+"""FGI (seed 000, Table 2): periodic staircase experiment and G(jk omega)."""
+
+import argparse
+import math
+from pathlib import Path
+
+import jax.numpy as jnp
+import numpy as np
+
+from ..._errors import UserInputError
+from ..._results import RESULTS
+from ...identification.fgi import identify_fgi
+from ...io import read_json, write_csv, write_json
+from ...signals import fgi_period_samples, initialisation_step, periodic_staircase
+from .._common import positive_float, positive_int
+from .nbbi import check_levels, read_data, read_design
+
+
+DISCRETISATION = (
+    "u is reconstructed exactly (piecewise constant on whole samples); (22) integrates "
+    "y_f held over each sample (ZOH convention): relative error about k*omega*dt/2 in "
+    "phase and (k*omega*dt)^2/24 in gain; 'rectangle' leaves only aliasing"
+)
+
+
+def add_experiment_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--nbbi", type=Path, required=True, help="finished nbbi folder")
+    p.add_argument(
+        "--omega",
+        type=positive_float,
+        action="append",
+        required=True,
+        help="fundamental frequency (rad/s); repeat for several (Remark 2a)",
+    )
+    p.add_argument(
+        "--periods", type=positive_int, required=True, help="M periods averaged (20)"
+    )
+    p.add_argument(
+        "--dt", type=positive_float, required=True, help="sampling period (s)"
+    )
+    p.add_argument(
+        "--transient-periods",
+        type=int,
+        default=None,
+        help="periods discarded before the M averaged ones (default: enough to cover "
+        "the NBBI hold time N*Tr, which was chosen long enough to settle)",
+    )
+    p.add_argument(
+        "--init-duration",
+        type=positive_float,
+        default=None,
+        help="T0 of the initialisation step (3), seconds (default: the NBBI one)",
+    )
+    p.add_argument("--out", type=Path, required=True, help="experiment folder")
+
+
+def experiment(args: argparse.Namespace) -> int:
+    nbbi_dir: Path = args.nbbi
+    nbbi_design = read_design(nbbi_dir, "nbbi")
+    res_path = nbbi_dir / "result.json"
+    if not res_path.is_file():
+        raise UserInputError(f"{res_path}: file not found (run `hamjax identify nbbi`)")
+    nbbi = read_json(res_path)
+    levels = check_levels(nbbi_design["levels"], str(nbbi_dir / "experiment.json"))
+    m = 2 * len(levels) - 2
+    cycle = np.asarray(nbbi.get("cycle", []), dtype=float)
+    if cycle.shape != (m, 2) or not np.all(np.isfinite(cycle)):
+        raise UserInputError(f"{res_path}: 'cycle' must hold {m} finite [V, U] points")
+    stderr = nbbi.get("uncertainty", nbbi.get("stderr"))
+    dt = float(args.dt)
+    if args.transient_periods is not None and args.transient_periods < 0:
+        raise UserInputError("--transient-periods must be >= 0")
+    init = args.init_duration or float(
+        nbbi_design.get("init_duration", nbbi_design["hold"])
+    )
+    settle = float(nbbi_design["hold"])
+    if abs(init / dt - round(init / dt)) > 1e-9 * max(1.0, init / dt):
+        raise UserInputError(
+            f"--init-duration {init:g} s (default: the NBBI one) is not a whole number "
+            f"of samples of --dt {dt:g}"
+        )
+    blocks, start = [], int(round(init / dt)) * 2
+    for omega in args.omega:
+        try:
+            period_samples, used = fgi_period_samples(omega, dt, len(levels))
+        except ValueError as err:
+            raise UserInputError(f"--omega {omega:g}: {err}") from None
+        period = period_samples * dt
+        transient = (
+            math.ceil(settle / period)
+            if args.transient_periods is None
+            else args.transient_periods
+        )
+        total = transient + args.periods
+        blocks.append(
+            {
+                "omega_requested": omega,
+                "omega": used,
+                "period_samples": period_samples,
+                "transient_periods": transient,
+                "periods": args.periods,
+                "start": start,
+                "average_start": start + transient * period_samples,
+            }
+        )
+        start += total * period_samples
+    design = {
+        "method": "fgi",
+        "dt": dt,
+        "levels": levels,
+        "cycle_levels": cycle[:, 0].tolist(),
+        "cycle_values": cycle[:, 1].tolist(),
+        "cycle_stderr": stderr,
+        "nbbi": str(nbbi_dir),
+        "init_duration": init,
+        "periods": args.periods,
+        "omega": [b["omega"] for b in blocks],
+        "blocks": blocks,
+        "n_samples": start,
+        "note": "input.csv = initialisation (3), then for each omega the periodic "
+        "staircase (24) for transient_periods + periods periods; the system must "
+        "start at rest",
+    }
+    t, v = fgi_input(design)
+    args.out.mkdir(parents=True, exist_ok=True)
+    write_json(args.out / "experiment.json", design)
+    write_csv(args.out / "input.csv", {"t": t, "v": v})
+    used = ", ".join(f"{b['omega']:.6g}" for b in blocks)
+    print(
+        f"wrote {args.out / 'experiment.json'} and input.csv ({t.shape[0]} samples); "
+        f"omega used: {used} rad/s"
+    )
+    return 0
+
+
+def fgi_input(design: dict) -> tuple[np.ndarray, np.ndarray]:
+    """The designed input: initialisation (3), then (24) for each omega block."""
+    levels = jnp.asarray(design["levels"], dtype=float)
+    dt = float(design["dt"])
+    try:
+        _, v0 = initialisation_step(
+            levels, duration=float(design["init_duration"]), dt=dt
+        )
+        parts = [np.asarray(v0)]
+        for b in design["blocks"]:
+            _, vb = periodic_staircase(
+                levels,
+                period_samples=int(b["period_samples"]),
+                periods=int(b["transient_periods"]) + int(b["periods"]),
+                dt=dt,
+            )
+            parts.append(np.asarray(vb))
+    except (ValueError, KeyError, TypeError) as err:
+        raise UserInputError(f"experiment.json: invalid FGI design ({err})") from None
+    v = np.concatenate(parts)
+    return np.arange(v.shape[0]) * dt, v
+
+
+def add_identify_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("dir", type=Path, help="experiment folder with data.csv")
+    p.add_argument(
+        "--epsilon",
+        type=float,
+        default=0.05,
+        help="Remark 2b: keep harmonics up to the power fraction 1 - epsilon (0.05)",
+    )
+    p.add_argument(
+        "--max-harmonic", type=positive_int, default=64, help="largest k considered"
+    )
+    p.add_argument(
+        "--quadrature",
+        choices=("hold", "rectangle"),
+        default="rectangle",
+        help="integration of (22) from the samples of y: rectangle (periodic "
+        "rectangle rule, aliasing error only; default) or hold (y held over each "
+        "sample, relative error about k*omega*dt/2)",
+    )
+
+
+def identify(args: argparse.Namespace) -> int:
+    folder: Path = args.dir
+    if not 0 < args.epsilon < 1:
+        raise UserInputError(f"--epsilon must be in (0, 1); got {args.epsilon}")
+    design = read_design(folder, "fgi")
+    _, v = fgi_input(design)
+    y = read_data(folder, design, v)
+    stderr = design.get("cycle_stderr")
+    entries, summaries = [], []
+    for b in design["blocks"]:
+        res = identify_fgi(
+            y,
+            design["cycle_values"],
+            period_samples=int(b["period_samples"]),
+            periods=int(b["periods"]),
+            dt=float(design["dt"]),
+            start=int(b["average_start"]),
+            epsilon=args.epsilon,
+            max_harmonic=args.max_harmonic,
+            cycle_stderr=None if stderr is None else jnp.asarray(stderr, dtype=float),
+            quadrature=args.quadrature,
+            throw=False,
+        )
+        if res.result != RESULTS.successful:
+            raise UserInputError(
+                f"{folder / 'data.csv'}: omega = {b['omega']:g}: no usable harmonic "
+                "(the NBBI cycle is flat or the output is not finite)"
+            )
+        fr = res.frequency_response()
+        entries.extend(fr)
+        summaries.append(
+            {
+                "omega": float(res.omega),
+                "parseval_order": int(res.order),
+                "kept": [e["k"] for e in fr],
+            }
+        )
+    result = {
+        "method": "fgi",
+        "frequency_response": entries,
+        "omega": [s["omega"] for s in summaries],
+        "harmonics": summaries,
+        "epsilon": args.epsilon,
+        "quadrature": args.quadrature,
+        "discretisation": DISCRETISATION,
+    }
+    write_json(folder / "result.json", result)
+    print(f"wrote {folder / 'result.json'}: {len(entries)} frequency-response points")
+    return 0

@@ -1,0 +1,211 @@
+"""NBBI (seed 000, Table 1): staircase experiment and backlash border points."""
+
+import argparse
+import math
+from pathlib import Path
+
+import jax.numpy as jnp
+import numpy as np
+
+from ..._errors import UserInputError
+from ...identification.nbbi import identify_nbbi, narrow_message
+from ...io import read_csv, read_json, write_csv, write_json
+from ...signals import initialisation_step, nbbi_staircase
+from .._common import float_list, positive_float
+
+
+# ----------------------------------------------------------------------------- design
+
+
+def add_experiment_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--levels",
+        type=float_list,
+        required=True,
+        help="V1,...,Vn strictly increasing, n >= 3 (e.g. --levels=-1,-0.5,0,0.5,1)",
+    )
+    p.add_argument(
+        "--hold", type=positive_float, required=True, help="seconds per level (N*Tr)"
+    )
+    p.add_argument(
+        "--dt", type=positive_float, required=True, help="sampling period (s)"
+    )
+    p.add_argument(
+        "--init-duration",
+        type=positive_float,
+        default=None,
+        help="T0 of the initialisation step (3), seconds (default: --hold)",
+    )
+    p.add_argument("--out", type=Path, required=True, help="experiment folder")
+
+
+def experiment(args: argparse.Namespace) -> int:
+    levels = check_levels(args.levels, "--levels")
+    init = args.hold if args.init_duration is None else args.init_duration
+    design = {
+        "method": "nbbi",
+        "dt": args.dt,
+        "levels": levels,
+        "hold": args.hold,
+        "init_duration": init,
+    }
+    t, v = nbbi_input(design)
+    design["init_samples"] = int(
+        initialisation_step(levels, duration=init, dt=args.dt)[0].shape[0]
+    )
+    design["hold_samples"] = int(round(args.hold / args.dt))
+    design["n_samples"] = int(t.shape[0])
+    design["note"] = (
+        "input.csv = initialisation step (3) (v_M then v_m, init_duration each) followed "
+        "by the staircase (4a-b); the system must start at rest"
+    )
+    args.out.mkdir(parents=True, exist_ok=True)
+    write_json(args.out / "experiment.json", design)
+    write_csv(args.out / "input.csv", {"t": t, "v": v})
+    print(f"wrote {args.out / 'experiment.json'} and input.csv ({t.shape[0]} samples)")
+    return 0
+
+
+def check_levels(levels, what: str) -> list[float]:
+    """Strictly increasing, at least 3 (Table 1)."""
+    levels = [float(x) for x in levels]
+    if len(levels) < 3:
+        raise UserInputError(f"{what}: NBBI needs n >= 3 levels; got {len(levels)}")
+    for i in range(len(levels) - 1):
+        if not levels[i] < levels[i + 1]:
+            raise UserInputError(
+                f"{what}: levels must be strictly increasing; got {levels[i]:g} then "
+                f"{levels[i + 1]:g}"
+            )
+    return levels
+
+
+def nbbi_input(design: dict) -> tuple[np.ndarray, np.ndarray]:
+    """The designed input: initialisation (3) then staircase (4a-b)."""
+    levels = jnp.asarray(design["levels"], dtype=float)
+    dt = float(design["dt"])
+    try:
+        _, v0 = initialisation_step(
+            levels, duration=float(design["init_duration"]), dt=dt
+        )
+        _, v1 = nbbi_staircase(levels, hold=float(design["hold"]), dt=dt)
+    except ValueError as err:
+        raise UserInputError(str(err)) from None
+    v = np.concatenate([np.asarray(v0), np.asarray(v1)])
+    return np.arange(v.shape[0]) * dt, v
+
+
+# ----------------------------------------------------------------------------- identify
+
+
+def add_identify_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("dir", type=Path, help="experiment folder with data.csv")
+    g = p.add_mutually_exclusive_group()
+    g.add_argument(
+        "--discard",
+        type=float,
+        default=0.0,
+        help="seconds discarded at the start of each interval before averaging "
+        "(default 0: the plain average (5))",
+    )
+    g.add_argument(
+        "--settled",
+        action="store_true",
+        help="average only the second half of each interval (discards the transient)",
+    )
+
+
+def identify(args: argparse.Namespace) -> int:
+    folder: Path = args.dir
+    design = read_design(folder, "nbbi")
+    _, v = nbbi_input(design)
+    y = read_data(folder, design, v)
+    dt, hold = float(design["dt"]), float(design["hold"])
+    per_level = int(round(hold / dt))
+    if args.settled:
+        discard = (per_level // 2) * dt
+    else:
+        discard = float(args.discard)
+        if not (math.isfinite(discard) and 0 <= discard < hold):
+            raise UserInputError(
+                f"--discard must be in [0, hold = {hold:g}); got {discard}"
+            )
+        discard = round(discard / dt) * dt
+    res = identify_nbbi(
+        y,
+        design["levels"],
+        hold=hold,
+        dt=dt,
+        start=int(design["init_samples"]),
+        discard=discard,
+        throw=False,
+    )
+    if not _ok(res):
+        raise UserInputError(f"{folder / 'data.csv'}: {narrow_message(res)}")
+    result = {
+        "method": "nbbi",
+        "ascending": np.asarray(res.ascending).tolist(),
+        "descending": np.asarray(res.descending).tolist(),
+        "cycle": np.asarray(res.cycle).tolist(),
+        "stderr": np.asarray(res.stderr).tolist(),
+        "uncertainty": np.asarray(res.uncertainty).tolist(),
+        "noise_std": float(res.noise_std),
+        "average": "plain (5)"
+        if discard == 0
+        else f"settled (first {discard:g} s dropped)",
+        "discard": discard,
+        "note": "U values in output units (G(0) = 1), cycle order of (4a-b); stderr "
+        "assumes white noise; uncertainty adds the transient bias estimate",
+    }
+    write_json(folder / "result.json", result)
+    print(
+        f"wrote {folder / 'result.json'}: {2 * len(design['levels']) - 2} cycle points"
+    )
+    return 0
+
+
+def _ok(res) -> bool:
+    from ..._results import RESULTS
+
+    return bool(res.result == RESULTS.successful)
+
+
+def read_design(folder: Path, method: str) -> dict:
+    """experiment.json of `folder`, checked to be a `method` design."""
+    path = folder / "experiment.json"
+    if not path.is_file():
+        raise UserInputError(
+            f"{path}: file not found (run `hamjax experiment {method}`)"
+        )
+    design = read_json(path)
+    if design.get("method") != method:
+        raise UserInputError(
+            f"{path}: method is {design.get('method')!r}, not {method!r}"
+        )
+    return design
+
+
+def read_data(folder: Path, design: dict, v_designed: np.ndarray) -> np.ndarray:
+    """y of data.csv after checking it against the design (length, t, v)."""
+    path = folder / "data.csv"
+    data = read_csv(path, required=("t", "v", "y"))
+    n, dt = v_designed.shape[0], float(design["dt"])
+    t, v = data["t"], data["v"]
+    if t.shape[0] != n:
+        raise UserInputError(
+            f"{path}: {t.shape[0]} rows but experiment.json designs {n} samples"
+        )
+    step = (t[-1] - t[0]) / (n - 1)
+    if abs(t[0]) > 1e-9 * dt or abs(step - dt) > 1e-6 * dt:
+        raise UserInputError(
+            f"{path}: t must start at 0 with step dt = {dt:g} (experiment.json); "
+            f"got t0 = {t[0]:g}, step {step:g}"
+        )
+    bad = np.abs(v - v_designed) > 1e-9 * (1.0 + np.max(np.abs(v_designed)))
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise UserInputError(
+            f"{path}: column v differs from the designed input at line {i + 2} "
+            f"(t = {t[i]:g}): {v[i]:g} vs {v_designed[i]:g}"
+        )
+    return data["y"]

@@ -29,9 +29,12 @@ def check_strictly_increasing(name: str, x) -> None:
         return
     if value.ndim != 1:
         raise ValueError(f"{name} must be 1-D; got shape {value.shape}")
+    check_finite(name, value)
     steps = np.diff(value)
-    if np.any(steps <= 0):
-        i = int(np.argmax(steps <= 0))
+    # `not > 0` rather than `<= 0`, so that a NaN step is caught too.
+    bad = ~(steps > 0)
+    if np.any(bad):
+        i = int(np.argmax(bad))
         raise ValueError(
             f"{name} must be strictly increasing; got {name}[{i}]={value[i]:g} "
             f">= {name}[{i + 1}]={value[i + 1]:g}"

@@ -10,7 +10,9 @@ def tree_allclose(x, y, *, rtol=1e-10, atol=1e-12) -> bool:
     ly, ty = jtu.tree_flatten(y)
     if tx != ty:
         return False
-    return all(np.allclose(a, b, rtol=rtol, atol=atol) for a, b in zip(lx, ly))
+    return all(
+        np.allclose(a, b, rtol=rtol, atol=atol) for a, b in zip(lx, ly, strict=True)
+    )
 
 
 def reference_backlash(v, f_a, f_d, u0) -> np.ndarray:
@@ -32,10 +34,9 @@ def reference_zoh(num, den, u, dt) -> np.ndarray:
     `dlsim` (an implementation independent of hamjax's matrix exponential)."""
     from scipy import signal
 
-    numd, dend, _ = signal.cont2discrete(
-        (np.asarray(num, float), np.asarray(den, float)), dt, method="zoh"
-    )
-    _, y = signal.dlsim((np.ravel(numd), dend, dt), np.asarray(u, float))
+    ss = signal.tf2ss(np.asarray(num, float), np.asarray(den, float))
+    Ad, Bd, Cd, Dd, _ = signal.cont2discrete(ss, dt, method="zoh")
+    y = signal.dlsim((Ad, Bd, Cd, Dd, dt), np.asarray(u, float))[1]
     return np.ravel(y)
 
 

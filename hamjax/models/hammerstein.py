@@ -34,7 +34,9 @@ class Hammerstein(eqx.Module):
             )
 
 
-def scale_nonlinearity(nonlinearity: AbstractNonlinearity, gain) -> AbstractNonlinearity:
+def scale_nonlinearity(
+    nonlinearity: AbstractNonlinearity, gain
+) -> AbstractNonlinearity:
     """$k F$: the nonlinearity with its output multiplied by `gain`."""
     value = concrete(gain)
     if isinstance(nonlinearity, Backlash) and value is not None and value > 0:
@@ -61,7 +63,9 @@ def normalise_static_gain(plant: Hammerstein) -> Hammerstein:
     value = concrete(k)
     if value is not None and value == 0.0:
         raise ValueError("cannot normalise: the linear block's static gain G(0) is 0")
-    return Hammerstein(scale_nonlinearity(plant.nonlinearity, k), plant.linear.scaled(1 / k))
+    return Hammerstein(
+        scale_nonlinearity(plant.nonlinearity, k), plant.linear.scaled(1 / k)
+    )
 
 
 def static_gain(plant: Hammerstein) -> Float[Array, ""]:

@@ -5,7 +5,7 @@ import math
 import jax.numpy as jnp
 import numpy as np
 
-from .._checks import check_finite, check_strictly_increasing
+from .._checks import check_finite, check_strictly_increasing, concrete
 
 
 def samples_in(duration: float, dt: float, what: str) -> int:
@@ -23,7 +23,16 @@ def samples_in(duration: float, dt: float, what: str) -> int:
 
 
 def as_levels(levels, *, minimum: int, what: str = "levels") -> jnp.ndarray:
-    """Validate strictly increasing finite levels, at least `minimum` of them."""
+    """Validate strictly increasing finite levels, at least `minimum` of them.
+
+    Traced levels (under `jit`/`vmap`) get the shape checks only."""
+    if concrete(levels) is None:
+        arr = jnp.asarray(levels, dtype=float)
+        if arr.ndim != 1 or arr.shape[0] < minimum:
+            raise ValueError(
+                f"need a 1-D list of at least {minimum} {what}; got shape {arr.shape}"
+            )
+        return arr
     arr = np.asarray(levels, dtype=float)
     if arr.ndim != 1:
         raise ValueError(f"{what} must be a 1-D list; got shape {arr.shape}")

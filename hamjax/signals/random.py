@@ -15,6 +15,11 @@ def _check(n: int, dt: float) -> None:
         raise ValueError(f"sampling period dt must be > 0; got {dt}")
 
 
+def _check_hold(hold: int) -> None:
+    if int(hold) != hold or hold < 1:
+        raise ValueError(f"hold must be an integer >= 1 sample; got {hold}")
+
+
 def random_staircase(
     key: PRNGKeyArray,
     *,
@@ -26,10 +31,10 @@ def random_staircase(
 ) -> tuple[Times, Signal]:
     """Levels drawn uniformly in $[\\text{low}, \\text{high}]$, each held `hold` samples."""
     _check(n_samples, dt)
-    if hold < 1:
-        raise ValueError(f"hold must be >= 1 sample; got {hold}")
+    _check_hold(hold)
     if not low < high:
         raise ValueError(f"need low < high; got {low}, {high}")
+    n_samples, hold = int(n_samples), int(hold)
     n_levels = -(-n_samples // hold)
     levels = jr.uniform(key, (n_levels,), minval=low, maxval=high)
     return times(n_samples, dt), jnp.repeat(levels, hold)[:n_samples]
@@ -45,8 +50,8 @@ def prbs(
 ) -> tuple[Times, Signal]:
     """Random binary sequence $\\pm$`amplitude`, switching at most every `hold` samples."""
     _check(n_samples, dt)
-    if hold < 1:
-        raise ValueError(f"hold must be >= 1 sample; got {hold}")
+    _check_hold(hold)
+    n_samples, hold = int(n_samples), int(hold)
     n_levels = -(-n_samples // hold)
     bits = jr.bernoulli(key, 0.5, (n_levels,))
     v = jnp.where(bits, amplitude, -amplitude).astype(float)
@@ -73,6 +78,8 @@ def multisine(
     phases = jr.uniform(key, (harmonics,), maxval=2 * jnp.pi)
     k = jnp.arange(1, harmonics + 1, dtype=float)
     idx = jnp.arange(n_samples, dtype=float)
-    v = jnp.sum(jnp.cos(2 * jnp.pi * k[:, None] * idx[None, :] / n_samples + phases[:, None]), 0)
+    v = jnp.sum(
+        jnp.cos(2 * jnp.pi * k[:, None] * idx[None, :] / n_samples + phases[:, None]), 0
+    )
     v = v * rms / jnp.sqrt(jnp.mean(v**2))
     return times(n_samples, dt), v

@@ -55,6 +55,12 @@ def periodic_staircase(
     """
     cycle = staircase_cycle_levels(levels)
     m = cycle.shape[0]
+    if int(period_samples) != period_samples or int(periods) != periods:
+        raise ValueError(
+            f"period_samples and periods must be integers; got {period_samples}, "
+            f"{periods}"
+        )
+    period_samples, periods = int(period_samples), int(periods)
     if period_samples <= 0 or period_samples % m:
         raise ValueError(
             f"period of {period_samples} samples must be a positive multiple of "
@@ -82,7 +88,9 @@ def fgi_period_samples(omega: float, dt: float, n_levels: int) -> tuple[int, flo
         raise ValueError(f"omega must be finite and > 0; got {omega}")
     if not (math.isfinite(dt) and dt > 0):
         raise ValueError(f"sampling period dt must be > 0; got {dt}")
-    m = 2 * n_levels - 2
+    if int(n_levels) != n_levels or n_levels < 2:
+        raise ValueError(f"n_levels must be an integer >= 2; got {n_levels}")
+    m = 2 * int(n_levels) - 2
     per = 2 * math.pi / (omega * dt)
     k = round(per / m)
     if k < 1:

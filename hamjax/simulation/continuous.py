@@ -6,6 +6,7 @@ import diffrax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
+from .._checks import check_finite, check_strictly_increasing
 from .._types import Signal
 from ..models import ContinuousTransferFunction, Hammerstein, apply_nonlinearity
 
@@ -35,17 +36,26 @@ def simulate_diffrax(
     - `v`: input samples at `t`.
 
     **Returns:** $y(t_k)$, shape `(time,)`.
+
+    **Raises:** `ValueError` if `t` and `v` differ in shape, hold NaN/inf, or `t`
+    is not strictly increasing (values checked when concrete).
     """
+    v = jnp.asarray(v, dtype=float)
+    t = jnp.asarray(t, dtype=float)
+    if t.shape != v.shape or t.ndim != 1:
+        raise ValueError(
+            f"`t` and `v` must be 1-D of equal length; got {t.shape}, {v.shape}"
+        )
+    check_finite("input `v`", v)
+    check_finite("sample times `t`", t)
+    check_strictly_increasing("sample times `t`", t)
     if isinstance(plant, Hammerstein):
         linear = plant.linear
-        u = apply_nonlinearity(plant.nonlinearity, jnp.asarray(v, dtype=float))
+        u = apply_nonlinearity(plant.nonlinearity, v)
     else:
-        linear, u = plant, jnp.asarray(v, dtype=float)
+        linear, u = plant, v
     if not isinstance(linear, ContinuousTransferFunction):
         raise TypeError("simulate_diffrax needs a ContinuousTransferFunction")
-    t = jnp.asarray(t, dtype=float)
-    if t.shape != u.shape or t.ndim != 1:
-        raise ValueError(f"`t` and `v` must be 1-D of equal length; got {t.shape}, {u.shape}")
     A, B, C, D = linear.state_space()
     n = A.shape[0]
     if n == 0:
@@ -65,7 +75,9 @@ def simulate_diffrax(
             diffrax.PIDController(rtol=rtol, atol=atol), step_ts=t
         )
     else:
-        raise ValueError(f"interpolation must be 'hold' or 'linear'; got {interpolation!r}")
+        raise ValueError(
+            f"interpolation must be 'hold' or 'linear'; got {interpolation!r}"
+        )
 
     def vector_field(s, x, args):
         return A @ x + B[:, 0] * control(s)

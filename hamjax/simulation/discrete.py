@@ -4,7 +4,7 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from .._checks import concrete
+from .._checks import check_finite, concrete
 from .._types import Signal
 from ..models import (
     AbstractLinearBlock,
@@ -18,12 +18,18 @@ from ..models import (
 
 def check_stable(linear: AbstractLinearBlock, what: str = "the linear block") -> None:
     """Raise `ValueError` if a concrete `linear` block is unstable."""
-    coefficients = getattr(linear, "a", getattr(linear, "den", getattr(linear, "A", None)))
+    coefficients = getattr(
+        linear, "a", getattr(linear, "den", getattr(linear, "A", None))
+    )
     if coefficients is None or concrete(coefficients) is None:
         return
     if not linear.is_stable():
         poles = ", ".join(f"{p:.4g}" for p in linear.poles())
-        region = "|p| < 1" if not isinstance(linear, ContinuousTransferFunction) else "Re p < 0"
+        region = (
+            "|p| < 1"
+            if not isinstance(linear, ContinuousTransferFunction)
+            else "Re p < 0"
+        )
         raise ValueError(f"{what} is unstable: poles {poles} (need {region})")
 
 
@@ -46,6 +52,12 @@ def linear_response(
             raise ValueError("a continuous linear block needs the sampling period `dt`")
         return linear.discretise(dt).response(u)
     if isinstance(linear, DiscreteTransferFunction | DiscreteStateSpace):
+        own = linear.dt
+        if dt is not None and own is not None and abs(dt - own) > 1e-9 * own:
+            raise ValueError(
+                f"the data are sampled at dt = {dt:g} s but the discrete linear "
+                f"block has dt = {own:g} s"
+            )
         return linear.response(u)
     raise TypeError(f"unsupported linear block {type(linear).__name__}")
 
@@ -76,8 +88,9 @@ def simulate(
     if v.ndim != 1:
         raise ValueError(f"input `v` must be 1-D (time,); got shape {v.shape}")
     if concrete(v) is not None:
-        if not bool(jnp.all(jnp.isfinite(v))):
-            raise ValueError("input `v` contains NaN or inf")
+        # NumPy on the concrete value: a jnp test would be staged out (a tracer)
+        # when `v` is a constant closed over by a jitted function.
+        check_finite("input `v`", v)
     else:
         v = eqx.error_if(v, ~jnp.all(jnp.isfinite(v)), "input `v` contains NaN or inf")
     if not allow_unstable:

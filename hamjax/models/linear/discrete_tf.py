@@ -43,7 +43,9 @@ class DiscreteTransferFunction(AbstractDiscreteLinearBlock):
                 f"{self.a.shape}"
             )
         if self.b.ndim != 1 or self.b.shape[0] < 1:
-            raise ValueError(f"numerator `b` must be 1-D and non-empty; got {self.b.shape}")
+            raise ValueError(
+                f"numerator `b` must be 1-D and non-empty; got {self.b.shape}"
+            )
         a0 = concrete(self.a[0]) if concrete(self.a) is not None else None
         if a0 is not None and a0 != 1.0:
             raise ValueError(

@@ -36,5 +36,7 @@ class DeadZone(AbstractStaticNonlinearity):
 
     def __call__(self, v: Float[Array, "*shape"]) -> Float[Array, "*shape"]:
         return jnp.where(
-            v > self.upper, v - self.upper, jnp.where(v < self.lower, v - self.lower, 0.0)
+            v > self.upper,
+            v - self.upper,
+            jnp.where(v < self.lower, v - self.lower, 0.0),
         )

@@ -19,7 +19,9 @@ class OutputScaled(AbstractHysteresisNonlinearity):
     inner: AbstractHysteresisNonlinearity
     gain: Float[Array, ""]
 
-    def __init__(self, *, inner: AbstractHysteresisNonlinearity, gain: Float[ArrayLike, ""]):
+    def __init__(
+        self, *, inner: AbstractHysteresisNonlinearity, gain: Float[ArrayLike, ""]
+    ):
         self.inner = inner
         self.gain = jnp.asarray(gain, dtype=float)
 

@@ -70,4 +70,3 @@ class PiecewiseLinear(AbstractStaticNonlinearity):
         fields = {n: getattr(self, n) for n in ("k1", "k2", "d1", "d2", "l1", "l2")}
         fields.update(kwargs)
         return PiecewiseLinear(**fields)
-

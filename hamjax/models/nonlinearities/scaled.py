@@ -18,7 +18,9 @@ class Scaled(AbstractStaticNonlinearity):
     inner: AbstractStaticNonlinearity
     gain: Float[Array, ""]
 
-    def __init__(self, *, inner: AbstractStaticNonlinearity, gain: Float[ArrayLike, ""]):
+    def __init__(
+        self, *, inner: AbstractStaticNonlinearity, gain: Float[ArrayLike, ""]
+    ):
         self.inner = inner
         self.gain = jnp.asarray(gain, dtype=float)
 

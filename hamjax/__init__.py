@@ -2,6 +2,15 @@
 
 from ._results import RESULTS as RESULTS
 from ._x64 import enable_x64 as enable_x64
+from .identification import (
+    FGIResult as FGIResult,
+    NBBIResult as NBBIResult,
+    RecursivePLEstimate as RecursivePLEstimate,
+    RecursivePLResult as RecursivePLResult,
+    identify_fgi as identify_fgi,
+    identify_nbbi as identify_nbbi,
+    identify_recursive_pl as identify_recursive_pl,
+)
 from .models import (
     AbstractContinuousLinearBlock as AbstractContinuousLinearBlock,
     AbstractDiscreteLinearBlock as AbstractDiscreteLinearBlock,

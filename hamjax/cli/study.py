@@ -1,0 +1,120 @@
+"""`hamjax study NAME [...]` runs a registered Monte Carlo study; `--list` lists them."""
+
+import argparse
+import sys
+from pathlib import Path
+
+from .._errors import UserInputError
+from ._common import positive_int
+
+
+def register(sub) -> None:
+    from ..montecarlo.registry import discover_studies
+
+    parser = sub.add_parser(
+        "study",
+        help="run a registered Monte Carlo study (--list shows them)",
+        description="Run a registered Monte Carlo study. Results go to --out "
+        "chunk by chunk; running again with the same --out resumes.",
+    )
+    parser.add_argument(
+        "--list", action="store_true", help="list the registered studies and exit"
+    )
+    names = parser.add_subparsers(
+        dest="study", metavar="NAME", parser_class=type(parser)
+    )
+    for study in discover_studies().values():
+        p = names.add_parser(
+            study.name, help=study.description, description=study.description
+        )
+        add_study_arguments(p, study)
+    parser.set_defaults(func=run)
+
+
+def add_study_arguments(parser: argparse.ArgumentParser, study) -> None:
+    """The options every study takes, then the study's own."""
+    parser.add_argument(
+        "--realisations",
+        type=positive_int,
+        default=study.default_realisations,
+        help=f"number of Monte Carlo realisations (default {study.default_realisations})",
+    )
+    parser.add_argument(
+        "--chunk",
+        type=positive_int,
+        default=study.default_chunk,
+        help="realisations per compiled call; bounds the memory "
+        f"(default {study.default_chunk})",
+    )
+    parser.add_argument(
+        "--seed", type=int, default=0, help="root random seed (default 0)"
+    )
+    parser.add_argument(
+        "--out",
+        type=Path,
+        default=None,
+        help=f"output folder (default results/{study.name})",
+    )
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    if study.add_arguments is not None:
+        study.add_arguments(parser)
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..montecarlo.registry import discover_studies, get_study
+
+    if args.list:
+        studies = discover_studies()
+        width = max((len(n) for n in studies), default=0)
+        for name, study in studies.items():
+            print(f"{name:<{width}}  {study.description}")
+        return 0
+    if args.study is None:
+        raise UserInputError("give a study NAME (`hamjax study --list` shows them)")
+    return run_study(get_study(args.study), args)
+
+
+def run_study(study, args: argparse.Namespace) -> int:
+    """Run `study` with parsed `args`; print where the results are."""
+    import jax.random as jr
+
+    from .._x64 import enable_x64
+
+    enable_x64()
+    out = Path("results") / study.name if args.out is None else Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise UserInputError(f"--out {out}: exists and is not a folder")
+    out.mkdir(parents=True, exist_ok=True)
+    summary = study.run(
+        jr.key(args.seed),
+        realisations=args.realisations,
+        chunk=args.chunk,
+        out=out,
+        quiet=args.quiet,
+        args=args,
+    )
+    print(f"study {study.name}: {args.realisations} realisations, results in {out}")
+    headline = summary.get("headline") if isinstance(summary, dict) else None
+    if headline:
+        print(headline)
+    return 0
+
+
+def study_main(name: str, argv: list[str] | None = None) -> int:
+    """`main(argv)` of a thin `studies/<name>.py` script: same options as the CLI."""
+    import matplotlib
+
+    from .._errors import UserInputError as _UserInputError
+    from ..montecarlo.registry import get_study
+
+    matplotlib.use("Agg")
+    study = get_study(name)
+    parser = argparse.ArgumentParser(prog=f"{name}.py", description=study.description)
+    add_study_arguments(parser, study)
+    args = parser.parse_args(argv)
+    args.list, args.study = False, name
+    try:
+        return run_study(study, args)
+    except _UserInputError as err:
+        print(f"{name}: error: {err}", file=sys.stderr)
+        return 2

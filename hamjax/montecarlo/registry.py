@@ -1,0 +1,113 @@
+"""Study registry: modules in `hamjax.montecarlo.studies` are discovered by name.
+
+A study module defines
+
+- `NAME: str` (the command-line name, e.g. `"simulation-throughput"`),
+- `DESCRIPTION: str` (one line, shown by `hamjax study --list`),
+- optional `add_arguments(parser)` for study-specific options, optional
+  `DEFAULT_REALISATIONS` and `DEFAULT_CHUNK`,
+- `run(key, *, realisations, chunk, out, quiet, args) -> dict`, which writes its
+  figures and a JSON summary into the folder `out` and returns the summary.
+
+Adding a study is adding a module: no shared file changes. `register_study` adds
+one from elsewhere (for example a test) for the lifetime of the process.
+"""
+
+import importlib
+import pkgutil
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+from .._errors import UserInputError
+
+
+@dataclass(frozen=True)
+class Study:
+    """A registered study (see the module docstring for the meaning of the fields)."""
+
+    name: str
+    description: str
+    run: Callable[..., dict]
+    add_arguments: Callable[[Any], None] | None = None
+    default_realisations: int = 1000
+    default_chunk: int = 256
+
+
+_REGISTERED: dict[str, Study] = {}
+
+
+def register_study(
+    name: str,
+    *,
+    description: str,
+    run: Callable[..., dict],
+    add_arguments: Callable[[Any], None] | None = None,
+    default_realisations: int = 1000,
+    default_chunk: int = 256,
+) -> Study:
+    """Register a study defined outside `hamjax.montecarlo.studies`."""
+    if not isinstance(name, str) or not name or " " in name:
+        raise ValueError(f"study name must be a non-empty word; got {name!r}")
+    study = Study(
+        name, description, run, add_arguments, default_realisations, default_chunk
+    )
+    _REGISTERED[name] = study
+    return study
+
+
+def discover_studies() -> dict[str, Study]:
+    """All studies, sorted by name: the `studies` package's modules, then registered.
+
+    A module that fails to import is listed with the error as its description and
+    a `run` that raises it, so one broken study does not break the others.
+    """
+    from . import studies as package
+
+    found: dict[str, Study] = {}
+    for info in pkgutil.iter_modules(package.__path__):
+        if info.name.startswith("_"):
+            continue
+        module_name = f"{package.__name__}.{info.name}"
+        try:
+            module = importlib.import_module(module_name)
+            study = _from_module(module)
+        except Exception as err:  # noqa: BLE001 - reported, not swallowed
+            study = _broken(info.name.replace("_", "-"), module_name, err)
+        found[study.name] = study
+    found.update(_REGISTERED)
+    return dict(sorted(found.items()))
+
+
+def get_study(name: str) -> Study:
+    """The study called `name`; `UserInputError` listing the known names otherwise."""
+    studies = discover_studies()
+    if name not in studies:
+        known = ", ".join(studies) or "(none)"
+        raise UserInputError(f"unknown study {name!r}; known studies: {known}")
+    return studies[name]
+
+
+def _from_module(module) -> Study:
+    for attr, kind in (("NAME", str), ("DESCRIPTION", str)):
+        if not isinstance(getattr(module, attr, None), kind):
+            raise TypeError(f"study module {module.__name__} must define {attr}: str")
+    if not callable(getattr(module, "run", None)):
+        raise TypeError(f"study module {module.__name__} must define run(key, ...)")
+    return Study(
+        name=module.NAME,
+        description=module.DESCRIPTION,
+        run=module.run,
+        add_arguments=getattr(module, "add_arguments", None),
+        default_realisations=getattr(module, "DEFAULT_REALISATIONS", 1000),
+        default_chunk=getattr(module, "DEFAULT_CHUNK", 256),
+    )
+
+
+def _broken(name: str, module_name: str, err: Exception) -> Study:
+    message = f"cannot be imported: {type(err).__name__}: {err}"
+
+    def run(*args, **kwargs):
+        raise UserInputError(f"study {name} ({module_name}) {message}")
+
+    return Study(name=name, description=f"({message})", run=run)

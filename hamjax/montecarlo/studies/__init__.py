@@ -1,0 +1,1 @@
+"""Registered Monte Carlo studies: one module per study, found by `discover_studies`."""

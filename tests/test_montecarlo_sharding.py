@@ -1,0 +1,82 @@
+"""Sharding the realisation axis over 2 (forced host) devices gives the 1-device numbers."""
+
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import jax
+import jax.random as jr
+import numpy as np
+
+from hamjax.montecarlo import MonteCarloConfig, run_monte_carlo
+
+
+REPO = Path(__file__).resolve().parents[1]
+
+TRIAL = textwrap.dedent(
+    """
+    import jax.numpy as jnp
+    import jax.random as jr
+
+    def trial(key):
+        x = jr.normal(key, (5,))
+        return {"path": jnp.cumsum(x), "peak": jnp.max(x), "sign": jnp.sum(x > 0)}
+    """
+)
+
+CHILD = TRIAL + textwrap.dedent(
+    """
+    import sys
+    import jax
+    import numpy as np
+    jax.config.update("jax_enable_x64", True)
+    from hamjax.montecarlo import MonteCarloConfig, run_monte_carlo, runner
+    from hamjax.montecarlo.sharding import put_indices, realisation_sharding
+
+    assert len(jax.devices()) == 2, jax.devices()
+    sharding = realisation_sharding()
+    chunk = runner._run_chunk(
+        trial, jr.key(0), put_indices(np.arange(4, dtype=np.uint32), sharding), sharding
+    )
+    # chunk 3 is rounded up to 4 = 2 devices x 2; R = 13 leaves a padded last chunk.
+    res = run_monte_carlo(jr.key(11), trial, MonteCarloConfig(realisations=13, chunk=3))
+    np.savez(
+        sys.argv[1], devices=len(chunk["path"].sharding.device_set), **res
+    )
+    """
+)
+
+
+def test_two_devices_give_the_single_device_numbers(tmp_path):
+    script = tmp_path / "child.py"
+    script.write_text(CHILD)
+    env = {
+        **os.environ,
+        "XLA_FLAGS": "--xla_force_host_platform_device_count=2",
+        "JAX_PLATFORMS": "cpu",
+        "PYTHONPATH": str(REPO),
+    }
+    result_file = tmp_path / "sharded.npz"
+    proc = subprocess.run(
+        [sys.executable, str(script), str(result_file)],
+        env=env,
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    sharded = np.load(result_file)
+    assert int(sharded["devices"]) == 2  # the chunk really was split over both
+
+    namespace: dict = {}
+    exec(TRIAL, namespace)
+    assert len(jax.devices()) == 1
+    single = run_monte_carlo(
+        jr.key(11), namespace["trial"], MonteCarloConfig(realisations=13, chunk=5)
+    )
+    for name in ("path", "peak"):
+        np.testing.assert_allclose(sharded[name], single[name], rtol=1e-12, atol=0)
+    np.testing.assert_array_equal(sharded["sign"], single["sign"])

@@ -4,9 +4,15 @@ import os
 import random
 from pathlib import Path
 
-import jax
-import jax.random as jr
 import pytest
+
+from hamjax._runtime import avoid_eigen_pool_hang
+
+
+avoid_eigen_pool_hang()  # before jax starts its backend; see the docstring
+
+import jax  # noqa: E402
+import jax.random as jr  # noqa: E402
 
 
 jax.config.update("jax_enable_x64", True)

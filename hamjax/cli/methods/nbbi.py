@@ -113,6 +113,21 @@ def add_identify_arguments(p: argparse.ArgumentParser) -> None:
         action="store_true",
         help="average only the second half of each interval (discards the transient)",
     )
+    p.add_argument(
+        "--refine",
+        action="store_true",
+        help="add a joint output-error fit of the border points and a parametric "
+        "G(s) (optimistix), with standard errors, under 'refined'",
+    )
+    p.add_argument(
+        "--den-order",
+        type=int,
+        default=2,
+        help="order of G(s)'s denominator (--refine)",
+    )
+    p.add_argument(
+        "--num-order", type=int, default=1, help="order of G(s)'s numerator (--refine)"
+    )
 
 
 def identify(args: argparse.Namespace) -> int:
@@ -161,6 +176,27 @@ def identify(args: argparse.Namespace) -> int:
     print(
         f"wrote {folder / 'result.json'}: {2 * len(design['levels']) - 2} cycle points"
     )
+    if args.refine:
+        if not 1 <= args.den_order or not 0 <= args.num_order <= args.den_order:
+            raise UserInputError(
+                "--den-order must be >= 1 and 0 <= --num-order <= --den-order; got "
+                f"{args.den_order}, {args.num_order}"
+            )
+        from ...refinement import refine_nbbi_result
+
+        refined = refine_nbbi_result(
+            v,
+            y,
+            result,
+            levels=design["levels"],
+            dt=dt,
+            den_order=args.den_order,
+            num_order=args.num_order,
+        )
+        result.update(refined)
+        write_json(folder / "result.json", result)
+        state = "converged" if refined["converged"] else "did NOT converge"
+        print(f"refinement {state}; added 'refined' and 'standard_errors'")
     return 0
 
 

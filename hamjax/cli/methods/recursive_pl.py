@@ -119,6 +119,12 @@ def add_identify_arguments(p: argparse.ArgumentParser) -> None:
         default="gradient",
         help="the paper's normalised gradient (4.1) or batch least squares",
     )
+    p.add_argument(
+        "--refine",
+        action="store_true",
+        help="add an output-error refinement (optimistix) of the closed form, with "
+        "standard errors from the Fisher information, under 'refined'",
+    )
 
 
 def identify(args: argparse.Namespace) -> int:
@@ -145,8 +151,24 @@ def identify(args: argparse.Namespace) -> int:
     if code in (RESULTS.nonfinite, RESULTS.not_exciting):
         raise UserInputError(f"{folder / 'data.csv'}: {RESULTS[code]}")
     result = result_dict(res, rho=args.rho, estimator=args.estimator)
+    # The closed form is written first, so a failing refinement loses nothing.
     write_json(folder / "result.json", result)
     print(f"wrote {folder / 'result.json'}")
+    if getattr(args, "refine", False):
+        from ...refinement import refine_recursive_pl_result
+
+        refined = refine_recursive_pl_result(
+            v,
+            y,
+            result,
+            levels=levels,
+            order=int(design["order"]),
+            structure=args.structure,
+        )
+        result.update(refined)
+        write_json(folder / "result.json", result)
+        state = "converged" if refined["converged"] else "did NOT converge"
+        print(f"refinement {state}; added 'refined' and 'standard_errors'")
     if not result["consistent"]:
         print(
             f"hamjax: warning: the estimates are inconsistent with the named structure "

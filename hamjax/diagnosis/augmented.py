@@ -1,0 +1,282 @@
+"""The universal augmented model: the nominal Hammerstein plant with every catalogue
+effect in place, each at a parameter slot whose neutral value removes it.
+
+$v \\to$ delay $\\to$ rate limit $\\to$ backlash $\\to$ dead zone $\\to F \\to$ preload
+$\\to$ saturation $\\to$ extra pole $\\to G \\to h$ (output map).
+
+One shape of model for every case and every candidate means one compilation: a
+candidate is a *row* (which slots it frees, where it starts, its delay), a case is
+a `CaseArrays` (padded records and the nominal model in a fixed-size form), and
+`jax.vmap` runs all rows of all cases together.
+
+The linear block is held in a fixed-size state space of order `n_max`:
+a discrete $B/A$ is zero-padded (the response is unchanged); a continuous
+$\\text{num}/\\text{den}$ of order $n$ is multiplied above and below by
+$(s + \\lambda)^{n_{max} - n}$ (an exactly cancelling factor) and discretised by
+the zero-order hold, so its denominator coefficients stay the free parameters.
+"""
+
+import equinox as eqx
+import jax
+import jax.lax as lax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Bool, Float, Int
+
+from .effects.backlash import play_step
+from .effects.dead_zone import dead_zone
+from .effects.output_nonlinearity import output_map
+from .effects.preload import add_preload
+from .effects.rate_limit import rate_limit_step
+from .effects.saturation import saturate
+from .effects.time_delay import delay
+
+
+NOMINAL_SLOTS = ("k1", "k2", "d1", "d2", "l1", "l2", "in_scale", "out_scale", "gain")
+EFFECT_SLOTS = (
+    "rate",
+    "backlash",
+    "dz_lo",
+    "dz_hi",
+    "preload",
+    "sat_lo",
+    "sat_hi",
+    "pole",
+    "out_q2",
+    "out_q3",
+    "out_lo",
+    "out_hi",
+    "out_db",
+)
+# Slots whose physical value is |raw| (widths and rates are non-negative).
+_ABS_SLOTS = ("rate", "backlash", "dz_lo", "dz_hi", "out_db")
+EFFECT_NEUTRAL = {
+    "rate": np.inf,
+    "backlash": 0.0,
+    "dz_lo": 0.0,
+    "dz_hi": 0.0,
+    "preload": 0.0,
+    "sat_lo": -np.inf,
+    "sat_hi": np.inf,
+    "pole": 0.0,
+    "out_q2": 0.0,
+    "out_q3": 0.0,
+    "out_lo": -np.inf,
+    "out_hi": np.inf,
+    "out_db": 0.0,
+}
+POLE_MAX = 0.995  # the extra pole is 0.995 * sigmoid(raw): inside [0, 1), smooth
+NL_IDENTITY, NL_PIECEWISE, NL_TABULATED = 0, 1, 2
+
+
+def raw_from_physical(name: str, value: float) -> float:
+    """Inverse of the slot transform (used to place starting values)."""
+    if name == "pole":
+        x = min(max(value / POLE_MAX, 1e-6), 1 - 1e-6)
+        return float(np.log(x / (1 - x)))
+    return float(value)
+
+
+def slot_names(n_max: int) -> tuple[str, ...]:
+    """Names of the full parameter vector: nominal, effects, then `den1..den{n_max}`."""
+    return NOMINAL_SLOTS + EFFECT_SLOTS + tuple(f"den{i}" for i in range(1, n_max + 1))
+
+
+def slot_index(name: str, n_max: int) -> int:
+    return slot_names(n_max).index(name)
+
+
+class CaseArrays(eqx.Module):
+    """One case in fixed-size form (records padded to a common length `L`)."""
+
+    v_est: Float[Array, " L"]
+    y_est: Float[Array, " L"]
+    m_est: Float[Array, " L"]  # 1 on real samples, 0 on padding
+    v_val: Float[Array, " L"]
+    y_val: Float[Array, " L"]
+    m_val: Float[Array, " L"]
+    dt: Float[Array, ""]
+    is_ct: Float[Array, ""]  # 1.0 for a continuous linear block
+    nl_kind: Int[Array, ""]
+    tab_v: Float[Array, " T"]
+    tab_u: Float[Array, " T"]
+    b_disc: Float[Array, " n1"]  # discrete numerator, padded to n_max + 1
+    ct_num: Float[Array, " n1"]  # continuous numerator x pad factor, monic den
+    ct_pad: Float[Array, " n1"]  # the cancelling factor (s + lambda)^(n_max - n)
+    den_lead: Float[Array, ""]  # leading coefficient of the padded continuous den
+    anchor: Float[Array, " S"]  # raw value of each slot at theta = 0
+    scale: Float[Array, " S"]  # raw = anchor + scale * theta
+    neutral: Float[Array, " S"]  # physical value when the slot is not free
+    out_centre: Float[Array, ""]
+    out_half: Float[Array, ""]
+    y_scale: Float[Array, ""]
+
+
+class Row(eqx.Module):
+    """One candidate start: `idx[j]` is the slot moved by `theta[j]` (`S` = unused)."""
+
+    idx: Int[Array, " P"]
+    theta0: Float[Array, " P"]
+    tau: Int[Array, ""]
+    free: Bool[Array, " S"]
+
+
+def full_parameters(
+    theta: Float[Array, " P"], row: Row, case: CaseArrays
+) -> Float[Array, " S"]:
+    """Physical full parameter vector of a row at compact parameters `theta`."""
+    n_slots = case.anchor.shape[0]
+    moved = jnp.zeros(n_slots, theta.dtype).at[row.idx].add(theta, mode="drop")
+    raw = case.anchor + case.scale * moved
+    n_max = n_slots - len(NOMINAL_SLOTS) - len(EFFECT_SLOTS)
+    is_abs = np.isin(np.array(slot_names(n_max)), _ABS_SLOTS)
+    is_pole = np.array(slot_names(n_max)) == "pole"
+    phys = jnp.where(is_abs, jnp.abs(raw), raw)
+    phys = jnp.where(is_pole, POLE_MAX * jax.nn.sigmoid(raw), phys)
+    # `where`, not arithmetic, so the infinite neutral values never meet a tangent.
+    return jnp.where(row.free, phys, case.neutral)
+
+
+def _expm(M: Array, squarings: int = 12, order: int = 10) -> Array:
+    """Matrix exponential by a fixed Taylor series and squaring (no data-dependent
+    branches, so it compiles small under `vmap`/`jvp`; exact to rounding for
+    $\\|M\\| \\lesssim 10^3$, far beyond any sensible $|p|\\,dt$)."""
+    A = M / 2.0**squarings
+    term = jnp.eye(M.shape[0], dtype=M.dtype)
+    E = term
+    for k in range(1, order + 1):
+        term = term @ A / k
+        E = E + term
+    for _ in range(squarings):
+        E = E @ E
+    return E
+
+
+def _companion(num: Array, den: Array) -> tuple[Array, Array, Array, Array]:
+    """Controllable canonical form of num/den (equal lengths, den monic)."""
+    n = den.shape[0] - 1
+    A = jnp.concatenate([-den[1:][None, :], jnp.eye(n - 1, n)], axis=0)
+    B = jnp.eye(n, 1)
+    C = (num[1:] - den[1:] * num[0])[None, :]
+    return A, B, C, num[0]
+
+
+def _charpoly_adjugate(A: Array) -> tuple[Array, Array]:
+    """Faddeev-LeVerrier: monic char. poly (highest power first) and the matrices
+    $M_k$ with $\\mathrm{adj}(zI - A) = \\sum_k M_k z^{n-k}$ (products only, so it
+    differentiates cleanly)."""
+    n = A.shape[0]
+    c = [jnp.ones(())]
+    M = jnp.zeros_like(A)
+    Ms = []
+    for k in range(1, n + 1):
+        M = A @ M + c[-1] * jnp.eye(n)
+        Ms.append(M)
+        c.append(-jnp.trace(A @ M) / k)
+    return jnp.stack(c), jnp.stack(Ms)
+
+
+def linear_polynomials(p: Float[Array, " S"], case: CaseArrays) -> tuple[Array, Array]:
+    """Discrete `(b, a)` in $q^{-1}$ of the re-fitted linear block, length `n_max + 1`.
+
+    A continuous block is discretised exactly (zero-order hold, matrix exponential)
+    and converted to its transfer function by Faddeev-LeVerrier.
+    """
+    n_max = case.b_disc.shape[0] - 1
+    g = p[NOMINAL_SLOTS.index("gain")]
+    den = p[-n_max:]
+    a_disc = jnp.concatenate([jnp.ones(1), den])
+    den_ct = jnp.convolve(jnp.concatenate([case.den_lead[None], den]), case.ct_pad)
+    den_ct = den_ct[-(n_max + 1) :]
+    Ac, Bc, Cc, Dc = _companion(g * case.ct_num, den_ct)
+    M = jnp.zeros((n_max + 1, n_max + 1))
+    M = M.at[:n_max, :n_max].set(Ac * case.dt).at[:n_max, n_max:].set(Bc * case.dt)
+    E = _expm(M)
+    Ad, Bd = E[:n_max, :n_max], E[:n_max, n_max:]
+    c, Ms = _charpoly_adjugate(Ad)
+    # b_j = C M_j B + D c_j (coefficient of z^{n-j}), j = 1..n
+    cmb = jnp.einsum("i,kij,j->k", Cc[0], Ms, Bd[:, 0])
+    b_ct = jnp.concatenate([Dc[None], cmb + Dc * c[1:]])
+    ct = case.is_ct > 0.5
+    return jnp.where(ct, b_ct, g * case.b_disc), jnp.where(ct, c, a_disc)
+
+
+def static_map(v: Array, p: Float[Array, " S"], case: CaseArrays) -> Array:
+    """The nominal static nonlinearity $F$ with re-fitted parameters."""
+    k1, k2, d1, d2, l1, l2, si, so, _ = (p[i] for i in range(len(NOMINAL_SLOTS)))
+    pl = jnp.where(
+        v > d1, k1 * (v - d1) + l1, jnp.where(v < d2, k2 * (v - d2) + l2, 0.0)
+    )
+    tab = so * jnp.interp(si * v, case.tab_v, case.tab_u)
+    return jnp.where(
+        case.nl_kind == NL_PIECEWISE,
+        pl,
+        jnp.where(case.nl_kind == NL_TABULATED, tab, v),
+    )
+
+
+def filter_df2t(b: Array, a: Array, u: Array) -> Array:
+    """`scipy.signal.lfilter(b, a, u)` from rest (direct form II transposed)."""
+    n = a.shape[0] - 1
+
+    def step(z, uk):
+        yk = b[0] * uk + z[0]
+        z = jnp.concatenate([z[1:], jnp.zeros(1, z.dtype)]) + b[1:] * uk - a[1:] * yk
+        return z, yk
+
+    _, y = lax.scan(step, jnp.zeros(n, u.dtype), u, unroll=2)
+    return y
+
+
+def input_memory(
+    v: Float[Array, " L"], max_step: Float[Array, ""], width: Float[Array, ""]
+) -> Float[Array, " L"]:
+    """Rate limit then play operator, both started at $v_0$ (one scan, two clamps)."""
+
+    def step(carry, vk):
+        xr, xb = carry
+        xr = rate_limit_step(xr, vk, max_step)
+        xb = play_step(xb, xr, width)
+        return (xr, xb), xb
+
+    _, x = lax.scan(step, (v[0], v[0]), v, unroll=2)
+    return x
+
+
+def simulate_augmented(
+    p: Float[Array, " S"], tau: Int[Array, ""], v: Float[Array, " L"], case: CaseArrays
+) -> Float[Array, " L"]:
+    """Output of the augmented model at physical parameters `p`, from rest."""
+    n_max = case.b_disc.shape[0] - 1
+    at = {name: p[i] for i, name in enumerate(slot_names(n_max))}
+    b, a = linear_polynomials(p, case)
+    pole = jnp.clip(at["pole"], 0.0, 0.995)
+    # The extra lag (1-p)/(1-p q^-1) is linear: fold it into B/A.
+    b = jnp.convolve(b, jnp.stack([1 - pole, jnp.zeros(())]))
+    a = jnp.convolve(a, jnp.stack([jnp.ones(()), -pole]))
+    v = delay(v, tau)
+    x = input_memory(v, at["rate"] * case.dt, at["backlash"])
+    vd = dead_zone(x, at["dz_lo"], at["dz_hi"])
+    u = add_preload(static_map(vd, p, case), vd, at["preload"])
+    u = saturate(u, at["sat_lo"], at["sat_hi"])
+    w = filter_df2t(b, a, u)
+    return output_map(
+        w,
+        case.out_centre,
+        case.out_half,
+        at["out_q2"],
+        at["out_q3"],
+        at["out_lo"],
+        at["out_hi"],
+        at["out_db"],
+    )
+
+
+def simulate_row(
+    theta: Float[Array, " P"], row: Row, v: Float[Array, " L"], case: CaseArrays
+) -> Float[Array, " L"]:
+    """`simulate_augmented` at a row's compact parameters."""
+    return simulate_augmented(full_parameters(theta, row, case), row.tau, v, case)
+
+
+simulate_rows = jax.vmap(simulate_row, in_axes=(0, 0, None, None))

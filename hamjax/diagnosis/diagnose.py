@@ -1,0 +1,162 @@
+"""`diagnose_gap`: where the sim-to-real gap lies, which effect causes it, how far it
+shrinks once that effect is added (the contract `../shared/contracts/gap-case.md`)."""
+
+from collections import defaultdict
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import jax.tree_util as jtu
+import numpy as np
+
+from ..models import Hammerstein
+from .attribute import Attribution, attribute
+from .fit import fit_cases
+from .layout import bucket, n_free_parameters, prepare
+from .locate import locate
+
+
+class GapDiagnosis(eqx.Module):
+    """The diagnosis of one case (validation-record arrays for the figures)."""
+
+    effect: str
+    gap_before: float
+    gap_after: float
+    noise_floor: float
+    shrink: float
+    ranking: list
+    where: dict
+    tests: dict
+    gap_definition: str
+    t: np.ndarray
+    v: np.ndarray
+    y: np.ndarray
+    y_nominal: np.ndarray
+    y_augmented: np.ndarray
+    residual_before: np.ndarray
+    residual_after: np.ndarray
+
+
+def _length_group(n: int) -> int:
+    # coarse groups (powers of two) so a batch of cases compiles only a few times
+    b = bucket(n)
+    return int(2 ** np.ceil(np.log2(b)))
+
+
+def _result(prep, att: Attribution, val: dict) -> GapDiagnosis:
+    chosen = att.chosen
+    if chosen is None:
+        y_aug, r_after = att.y_nominal, att.r_before
+    elif chosen.prediction is None:  # noise model: the one-step-ahead predictor
+        r_after = chosen.residual
+        y_aug = val["y"] - r_after
+    else:
+        y_aug, r_after = chosen.prediction, chosen.residual
+    noise = chosen is not None and chosen.measure == "one_step_prediction"
+    definition = (
+        "one-step-ahead prediction error (nominal simulation + fitted noise/trend "
+        "predictor; gap_before with the white-noise predictor)"
+        if noise
+        else "simulation error from rest on the validation record"
+    )
+    ranking = [
+        {
+            "effect": c.effect,
+            "gap_after": c.gap_after,
+            "measure": c.measure,
+            "params": c.params,
+        }
+        for c in att.candidates
+    ]
+    where = locate(
+        val["t"],
+        val["v"],
+        att.r_before,
+        r_after,
+        prep.u_val,
+        att.noise_floor,
+        prep.ctx.dt,
+    )
+    return GapDiagnosis(
+        effect=att.effect,
+        gap_before=att.gap_before,
+        gap_after=att.gap_after,
+        noise_floor=att.noise_floor,
+        shrink=att.shrink,
+        ranking=ranking,
+        where=where,
+        tests=att.tests,
+        gap_definition=definition,
+        t=val["t"],
+        v=val["v"],
+        y=val["y"],
+        y_nominal=att.y_nominal,
+        y_augmented=np.asarray(y_aug),
+        residual_before=att.r_before,
+        residual_after=np.asarray(r_after),
+    )
+
+
+def diagnose_many(
+    items: list[tuple[Hammerstein, float, dict, dict]], *, chunk: int = 8
+) -> list[GapDiagnosis]:
+    """Diagnose several cases: `(plant, dt, estimation, validation)` each, the records
+    being `{"t", "v", "y"}` dicts of NumPy arrays.
+
+    Cases are padded to a few common lengths and fitted together (`vmap` over cases
+    and candidate rows), `chunk` cases per call of the one compiled function.
+    """
+    groups = defaultdict(list)
+    for i, (_plant, _dt, est, val) in enumerate(items):
+        n = max(est["v"].shape[0], val["v"].shape[0])
+        groups[_length_group(n)].append(i)
+    n_params = max(n_free_parameters(plant) for plant, *_ in items)
+    out: list = [None] * len(items)
+    for length, members in groups.items():
+        for start in range(0, len(members), chunk):
+            part = members[start : start + chunk]
+            preps = [
+                prepare(
+                    items[i][0], items[i][1], items[i][2], items[i][3], length, n_params
+                )
+                for i in part
+            ]
+            # pad the chunk to `chunk` cases with copies so the shape never changes
+            padded = (
+                preps + [preps[-1]] * (chunk - len(preps)) if len(items) > 1 else preps
+            )
+            rows = jtu.tree_map(
+                lambda *x: jnp.stack(x),
+                *[
+                    jtu.tree_map(lambda *r: jnp.stack(r), *[r for _, r in p.rows])
+                    for p in padded
+                ],
+            )
+            cases = jtu.tree_map(lambda *x: jnp.stack(x), *[p.arrays for p in padded])
+            fits = jax.device_get(fit_cases(rows, cases))
+            for j, i in enumerate(part):
+                fit = {
+                    k: np.asarray(getattr(fits, k))[j]
+                    for k in fits.__dataclass_fields__
+                }
+                att = attribute(preps[j], fit)
+                out[i] = _result(preps[j], att, items[i][3])
+    return out
+
+
+def diagnose_gap(
+    plant: Hammerstein, dt: float, estimation: dict, validation: dict
+) -> GapDiagnosis:
+    """Diagnose the gap between `plant` (the nominal model) and two records.
+
+    **Arguments:**
+
+    - `plant`: nominal Hammerstein model (identity, piecewise-linear or tabulated
+      map; discrete or continuous linear block of order <= 4).
+    - `dt`: sampling period (s).
+    - `estimation`, `validation`: `{"t", "v", "y"}` dicts of NumPy arrays, two
+      separate experiments; effects are fitted on the first, scored on the second.
+
+    **Returns:** a `GapDiagnosis` (the contract's fields and the figure data).
+    """
+    return diagnose_many([(plant, dt, estimation, validation)])[0]

@@ -1,0 +1,44 @@
+"""`output_nonlinearity`: $y = h(w) + e$ with $h$ static and not affine."""
+
+import jax.numpy as jnp
+from jaxtyping import Array, Float
+
+from ._base import AbstractEffect, StartContext
+
+
+def output_map(
+    w: Float[Array, "*shape"],
+    centre: Float[Array, ""],
+    half: Float[Array, ""],
+    q2: Float[Array, ""],
+    q3: Float[Array, ""],
+    lower: Float[Array, ""],
+    upper: Float[Array, ""],
+    band: Float[Array, ""],
+) -> Float[Array, "*shape"]:
+    """$h(w)$: a sensor dead band $b$ around 0, a quadratic/cubic bend
+    $w + H(q_2\\tilde w^2 + q_3\\tilde w^3)$ with $\\tilde w = (w - m)/H$, then clipping.
+
+    Neutral at $b = 0$, $q_2 = q_3 = 0$, $[lower, upper] = [-\\infty, \\infty]$.
+    """
+    o = w - jnp.clip(w, -band, band)
+    s = (o - centre) / half
+    o = o + half * (q2 * s**2 + q3 * s**3)
+    return jnp.clip(o, lower, upper)
+
+
+class OutputNonlinearityEffect(AbstractEffect):
+    """Three shapes of one class: polynomial bend, sensor saturation, dead band."""
+
+    name = "output_nonlinearity"
+    slots = ("out_q2", "out_q3", "out_lo", "out_hi", "out_db")
+
+    def starts(self, ctx: StartContext) -> list[dict[str, float]]:
+        wq = ctx.w_quantiles
+        half = max((wq[0.98] - wq[0.02]) / 2, 1e-12)
+        return [
+            {"out_q2": 0.0, "out_q3": 0.0},
+            {"out_lo": float(wq[0.1]), "out_hi": float(wq[0.9])},
+            {"out_db": 0.1 * half},
+            {"out_db": 0.3 * half},
+        ]

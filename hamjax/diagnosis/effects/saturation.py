@@ -1,0 +1,30 @@
+"""`saturation`: $u' = \\mathrm{clip}(F(v), u_{lo}, u_{hi})$ between $F$ and $G$."""
+
+import jax.numpy as jnp
+from jaxtyping import Array, Float
+
+from ._base import AbstractEffect, StartContext, quantile_pair
+
+
+def saturate(
+    u: Float[Array, "*shape"], lower: Float[Array, ""], upper: Float[Array, ""]
+) -> Float[Array, "*shape"]:
+    """$\\mathrm{clip}(u, u_{lo}, u_{hi})$; neutral at $\\mp\\infty$.
+
+    >>> saturate(jnp.array([-3.0, 0.0, 3.0]), -1.0, 2.0)  # [-1, 0, 2]
+    """
+    return jnp.clip(u, lower, upper)
+
+
+class SaturationEffect(AbstractEffect):
+    """Two-sided clipping of the nominal $u$ (neutral $u_{lo} = -\\infty$, $u_{hi} = \\infty$)."""
+
+    name = "saturation"
+    slots = ("sat_lo", "sat_hi")
+
+    def starts(self, ctx: StartContext) -> list[dict[str, float]]:
+        out = []
+        for lo, hi in ((0.1, 0.9), (0.3, 0.7)):
+            a, b = quantile_pair(ctx, lo, hi)
+            out.append({"sat_lo": a, "sat_hi": b})
+        return out

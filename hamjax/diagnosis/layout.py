@@ -1,0 +1,380 @@
+"""Turn a nominal plant and two records into the fixed-size arrays of the augmented
+model, and the candidate catalogue into rows (NumPy; runs once per case)."""
+
+from dataclasses import dataclass
+
+import jax.numpy as jnp
+import numpy as np
+
+from ..models import (
+    ContinuousTransferFunction,
+    DiscreteTransferFunction,
+    Hammerstein,
+    Identity,
+    PiecewiseLinear,
+    Tabulated,
+)
+from .augmented import (
+    EFFECT_NEUTRAL,
+    EFFECT_SLOTS,
+    NL_IDENTITY,
+    NL_PIECEWISE,
+    NL_TABULATED,
+    NOMINAL_SLOTS,
+    CaseArrays,
+    Row,
+    raw_from_physical,
+    slot_names,
+)
+from .effects import (
+    BacklashEffect,
+    DeadZoneEffect,
+    ExtraPoleEffect,
+    OutputNonlinearityEffect,
+    ParameterMismatch,
+    PreloadEffect,
+    RateLimitEffect,
+    SaturationEffect,
+    StartContext,
+    TimeDelayEffect,
+)
+from .effects.time_delay import MAX_DELAY
+
+
+DETERMINISTIC = (
+    ParameterMismatch(),
+    BacklashEffect(),
+    DeadZoneEffect(),
+    SaturationEffect(),
+    PreloadEffect(),
+    RateLimitEffect(),
+    TimeDelayEffect(),
+    ExtraPoleEffect(),
+    OutputNonlinearityEffect(),
+)
+BUCKETS = (256, 512, 1024, 1536, 2048, 3072, 4096, 6144, 8192, 12288, 16384)
+N_MAX = 4
+T_MAX = 64
+MAX_EFFECT_SLOTS = 2  # most slots any one candidate row frees
+QUANTILES = (0.02, 0.05, 0.1, 0.2, 0.3, 0.5, 0.7, 0.8, 0.9, 0.95, 0.98)
+
+
+def bucket(n: int) -> int:
+    """Smallest padded record length >= n (few lengths: few compilations)."""
+    for b in BUCKETS:
+        if n <= b:
+            return b
+    return int(np.ceil(n / 4096) * 4096)
+
+
+@dataclass(frozen=True)
+class Nominal:
+    """The re-fittable description of a nominal plant."""
+
+    nl_kind: int
+    pl: np.ndarray  # k1 k2 d1 d2 l1 l2
+    tab_v: np.ndarray
+    tab_u: np.ndarray
+    is_ct: bool
+    b: np.ndarray  # discrete numerator / continuous numerator (highest power first)
+    den: np.ndarray  # discrete a (a[0] = 1) / continuous den (highest power first)
+    order: int
+
+
+def describe_nominal(plant: Hammerstein) -> Nominal:
+    """Read the parameters the diagnosis may re-fit off a nominal plant.
+
+    **Raises:** `ValueError` for a nonlinearity or linear block outside the
+    `model.json` kinds handled by the diagnosis, or an order above `N_MAX`.
+    """
+    nl, lin = plant.nonlinearity, plant.linear
+    pl = np.array([1.0, 1.0, 0.0, 0.0, 0.0, 0.0])
+    tab_v, tab_u = np.array([-1.0, 1.0]), np.array([-1.0, 1.0])
+    if isinstance(nl, Identity):
+        kind = NL_IDENTITY
+    elif isinstance(nl, PiecewiseLinear):
+        kind = NL_PIECEWISE
+        pl = np.array(
+            [float(getattr(nl, k)) for k in ("k1", "k2", "d1", "d2", "l1", "l2")]
+        )
+    elif isinstance(nl, Tabulated):
+        kind = NL_TABULATED
+        tab_v, tab_u = np.asarray(nl.v, float), np.asarray(nl.u, float)
+        if tab_v.shape[0] > T_MAX:
+            raise ValueError(
+                f"tabulated map has {tab_v.shape[0]} points (at most {T_MAX})"
+            )
+    else:
+        raise ValueError(
+            f"the diagnosis handles identity, piecewise_linear and tabulated maps; got "
+            f"{type(nl).__name__} (a backlash nominal is not supported yet)"
+        )
+    if isinstance(lin, DiscreteTransferFunction):
+        b, den, ct = np.asarray(lin.b, float), np.asarray(lin.a, float), False
+        order = max(b.shape[0], den.shape[0]) - 1
+    elif isinstance(lin, ContinuousTransferFunction):
+        b, den, ct = np.asarray(lin.num, float), np.asarray(lin.den, float), True
+        order = den.shape[0] - 1
+    else:
+        raise ValueError(f"unsupported linear block {type(lin).__name__}")
+    if order > N_MAX:
+        raise ValueError(
+            f"linear block of order {order} (the diagnosis handles <= {N_MAX})"
+        )
+    if order < 1:
+        raise ValueError("the linear block must have at least one pole")
+    return Nominal(kind, pl, tab_v, tab_u, ct, b, den, order)
+
+
+def _pad_table(v: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    extra = T_MAX - v.shape[0]
+    step = max(abs(v[-1]) + abs(v[0]), 1.0) * 1e6
+    return (
+        np.concatenate([v, v[-1] + step * np.arange(1, extra + 1)]),
+        np.concatenate([u, np.full(extra, u[-1])]),
+    )
+
+
+def _pad_record(x: np.ndarray, length: int) -> tuple[np.ndarray, np.ndarray]:
+    n = x.shape[0]
+    pad = np.full(length - n, x[-1])
+    return np.concatenate([x, pad]), np.concatenate([np.ones(n), np.zeros(length - n)])
+
+
+def _linear_templates(nom: Nominal, dt: float):
+    n1 = N_MAX + 1
+    b_disc, ct_num, ct_pad = np.zeros(n1), np.zeros(n1), np.zeros(n1)
+    ct_pad[-1] = 1.0
+    den_slots, den_lead = np.zeros(N_MAX), 1.0
+    if not nom.is_ct:
+        b_disc[: nom.b.shape[0]] = nom.b
+        den_slots[: nom.den.shape[0] - 1] = nom.den[1:]
+        free = list(range(nom.den.shape[0] - 1))
+        ct_num[-1] = 0.0
+        return b_disc, ct_num, ct_pad, den_slots, den_lead, free
+    n = nom.order
+    den = nom.den / nom.den[0]
+    num = nom.b / nom.den[0]
+    lam = 1.0 / dt
+    pad = np.poly(-lam * np.ones(N_MAX - n)) if n < N_MAX else np.ones(1)
+    ct_pad[-pad.shape[0] :] = pad
+    full_num = np.convolve(num, pad)
+    ct_num[-full_num.shape[0] :] = full_num
+    den_pad = np.zeros(n1)
+    den_pad[-(n + 1) :] = den
+    den_slots, den_lead = den_pad[1:], den_pad[0]
+    free = list(range(N_MAX - n, N_MAX))
+    return b_disc, ct_num, ct_pad, den_slots, float(den_lead), free
+
+
+@dataclass(frozen=True)
+class Prepared:
+    """A case ready for the batched fit."""
+
+    arrays: CaseArrays
+    rows: list  # list of (class name, Row)
+    ctx: StartContext
+    nominal: Nominal
+    n_est: int
+    n_val: int
+    w_est: np.ndarray  # nominal output on the estimation record
+    w_val: np.ndarray
+    u_val: np.ndarray  # nominal u = F(v) on validation
+
+
+def prepare(
+    plant: Hammerstein,
+    dt: float,
+    est: dict,
+    val: dict,
+    length: int | None = None,
+    n_params: int | None = None,
+) -> Prepared:
+    """Case arrays and candidate rows for `plant` and the two records (`t,v,y` dicts)."""
+    nom = describe_nominal(plant)
+    n_est, n_val = est["v"].shape[0], val["v"].shape[0]
+    L = length or bucket(max(n_est, n_val))
+    u_est = np.asarray(_static_numpy(nom, est["v"]))
+    u_val = np.asarray(_static_numpy(nom, val["v"]))
+    w_est = _response_numpy(plant.linear, u_est, dt)
+    w_val = _response_numpy(plant.linear, u_val, dt)
+    v = est["v"]
+    ctx = StartContext(
+        v_min=float(v.min()),
+        v_max=float(v.max()),
+        v_absmax=float(np.abs(v).max()),
+        max_step=float(max(np.abs(np.diff(v)).max(), 1e-12)),
+        dt=float(dt),
+        u_quantiles={
+            q: float(x)
+            for q, x in zip(QUANTILES, np.quantile(u_est, QUANTILES), strict=False)
+        },
+        u_std=float(max(u_est.std(), 1e-12)),
+        w_quantiles={
+            q: float(x)
+            for q, x in zip(QUANTILES, np.quantile(w_est, QUANTILES), strict=False)
+        },
+    )
+    b_disc, ct_num, ct_pad, den_slots, den_lead, den_free = _linear_templates(nom, dt)
+    names = slot_names(N_MAX)
+    S = len(names)
+    anchor, scale, neutral = np.zeros(S), np.ones(S), np.zeros(S)
+    nominal_values = dict(
+        zip(("k1", "k2", "d1", "d2", "l1", "l2"), nom.pl, strict=False)
+    )
+    nominal_values.update(in_scale=1.0, out_scale=1.0, gain=1.0)
+    span = max(ctx.v_max - ctx.v_min, 1e-12)
+    for i, name in enumerate(NOMINAL_SLOTS):
+        val_ = nominal_values[name]
+        anchor[i] = neutral[i] = val_
+        if name in ("k1", "k2"):
+            scale[i] = 0.1 * max(abs(val_), 0.1)
+        elif name in ("d1", "d2", "l1", "l2"):
+            scale[i] = 0.05 * span
+        else:
+            scale[i] = 0.1
+    den_scale = 0.1 * max(np.abs(den_slots).max(), 1e-6)
+    for j in range(N_MAX):
+        i = len(NOMINAL_SLOTS) + len(EFFECT_SLOTS) + j
+        anchor[i] = neutral[i] = den_slots[j]
+        scale[i] = max(0.1 * abs(den_slots[j]), 0.1 * den_scale)
+    w_half = max(abs(ctx.w_quantiles[0.98]), abs(ctx.w_quantiles[0.02]), 1e-12)
+    w_centre = 0.0  # bend about w = 0 (a sensor's zero): a pure quadratic stays exact
+    effect_scale = {
+        "rate": 0.1 * ctx.max_step / dt,
+        "backlash": 0.05 * span,
+        "dz_lo": 0.05 * ctx.v_absmax,
+        "dz_hi": 0.05 * ctx.v_absmax,
+        "preload": 0.1 * ctx.u_std,
+        "sat_lo": 0.2 * ctx.u_std,
+        "sat_hi": 0.2 * ctx.u_std,
+        "pole": 1.0,
+        "out_q2": 0.05,
+        "out_q3": 0.05,
+        "out_lo": 0.2 * w_half,
+        "out_hi": 0.2 * w_half,
+        "out_db": 0.05 * w_half,
+    }
+    for name in EFFECT_SLOTS:
+        i = names.index(name)
+        neutral[i] = EFFECT_NEUTRAL[name]
+        scale[i] = effect_scale[name]
+    refit = ["gain"] + [f"den{j + 1}" for j in den_free]
+    if nom.nl_kind == NL_PIECEWISE:
+        refit += ["k1", "k2", "d1", "d2", "l1", "l2"]
+    elif nom.nl_kind == NL_TABULATED:
+        refit += ["in_scale", "out_scale"]
+    P = n_params or len(refit) + MAX_EFFECT_SLOTS
+    taus_tried = _delay_shortlist(est["y"], w_est)
+    rows = []
+    for effect in DETERMINISTIC:
+        taus = taus_tried if effect.name == "time_delay" else (0,)
+        for start in effect.starts(ctx):
+            for tau in taus:
+                free_names = refit + list(start)
+                idx = np.full(P, S)
+                idx[: len(free_names)] = [names.index(n) for n in free_names]
+                theta0 = np.zeros(P)
+                for j, n in enumerate(free_names):
+                    if n in start:
+                        raw = raw_from_physical(n, start[n])
+                        theta0[j] = (raw - anchor[names.index(n)]) / scale[
+                            names.index(n)
+                        ]
+                free = np.isin(np.array(names), free_names)
+                rows.append(
+                    (
+                        effect.name,
+                        Row(
+                            idx=jnp.asarray(idx),
+                            theta0=jnp.asarray(theta0),
+                            tau=jnp.asarray(tau),
+                            free=jnp.asarray(free),
+                        ),
+                    )
+                )
+    tab_v, tab_u = _pad_table(nom.tab_v, nom.tab_u)
+    v_est, m_est = _pad_record(est["v"], L)
+    y_est, _ = _pad_record(est["y"], L)
+    v_val, m_val = _pad_record(val["v"], L)
+    y_val, _ = _pad_record(val["y"], L)
+    f = lambda x: jnp.asarray(x, dtype=float)
+    arrays = CaseArrays(
+        v_est=f(v_est),
+        y_est=f(y_est),
+        m_est=f(m_est),
+        v_val=f(v_val),
+        y_val=f(y_val),
+        m_val=f(m_val),
+        dt=f(dt),
+        is_ct=f(1.0 if nom.is_ct else 0.0),
+        nl_kind=jnp.asarray(nom.nl_kind),
+        tab_v=f(tab_v),
+        tab_u=f(tab_u),
+        b_disc=f(b_disc),
+        ct_num=f(ct_num),
+        ct_pad=f(ct_pad),
+        den_lead=f(den_lead),
+        anchor=f(anchor),
+        scale=f(scale),
+        neutral=f(neutral),
+        out_centre=f(w_centre),
+        out_half=f(w_half),
+        y_scale=f(max(float(np.std(est["y"])), 1e-12)),
+    )
+    return Prepared(arrays, rows, ctx, nom, n_est, n_val, w_est, w_val, u_val)
+
+
+def n_free_parameters(plant: Hammerstein) -> int:
+    """Width of the compact parameter vector this plant's rows need."""
+    nom = describe_nominal(plant)
+    n_den = nom.order if nom.is_ct else nom.den.shape[0] - 1
+    extra = {NL_PIECEWISE: 6, NL_TABULATED: 2}.get(nom.nl_kind, 0)
+    return 1 + n_den + extra + MAX_EFFECT_SLOTS
+
+
+def _delay_shortlist(y: np.ndarray, w: np.ndarray, keep: int = 2) -> tuple[int, ...]:
+    """The `keep` whole-sample delays whose shifted nominal output fits `y` best
+    (a cheap screen; the kept ones are then fitted with the nominal re-fit)."""
+    sse = []
+    for tau in range(1, MAX_DELAY + 1):
+        shifted = np.concatenate([np.full(tau, w[0]), w[:-tau]])
+        a = np.vdot(shifted, y) / max(np.vdot(shifted, shifted), 1e-300)
+        sse.append(np.sum((y - a * shifted) ** 2))
+    return tuple(int(i) + 1 for i in np.argsort(sse)[:keep])
+
+
+def _response_numpy(linear, u: np.ndarray, dt: float) -> np.ndarray:
+    """Nominal linear response from rest (NumPy: no compilation per record length)."""
+    if isinstance(linear, ContinuousTransferFunction):
+        ss = linear.discretise(dt)
+        A, B, C, D = (np.asarray(x) for x in (ss.A, ss.B, ss.C, ss.D))
+    else:
+        b, a = np.asarray(linear.b), np.asarray(linear.a)
+        n = max(a.shape[0], b.shape[0])
+        b = np.r_[b, np.zeros(n - b.shape[0])]
+        a = np.r_[a, np.zeros(n - a.shape[0])]
+        if n == 1:
+            return b[0] * u
+        A = np.vstack([-a[1:][None, :], np.eye(n - 2, n - 1)])
+        B = np.eye(n - 1, 1)
+        C = (b[1:] - a[1:] * b[0])[None, :]
+        D = np.array([[b[0]]])
+    x = np.zeros(A.shape[0])
+    y = np.empty(u.shape[0])
+    Bc, Cr, d = B[:, 0], C[0], float(D[0, 0])
+    for k, uk in enumerate(u):
+        y[k] = Cr @ x + d * uk
+        x = A @ x + Bc * uk
+    return y
+
+
+def _static_numpy(nom: Nominal, v: np.ndarray) -> np.ndarray:
+    if nom.nl_kind == NL_PIECEWISE:
+        k1, k2, d1, d2, l1, l2 = nom.pl
+        return np.where(
+            v > d1, k1 * (v - d1) + l1, np.where(v < d2, k2 * (v - d2) + l2, 0.0)
+        )
+    if nom.nl_kind == NL_TABULATED:
+        return np.interp(v, nom.tab_v, nom.tab_u)
+    return np.asarray(v, float)

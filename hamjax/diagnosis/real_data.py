@@ -1,0 +1,152 @@
+"""Adapters: the measured datasets of `../shared/data/real/` as gap-case folders.
+
+Each adapter reads the dataset in place (never copied into the repository), picks
+the input/output columns, applies the split below and writes
+`estimation.csv`/`validation.csv` with the estimation record's means of v and y
+removed from both (no `model.json`: the default nominal model of
+`nominal_fit` is fitted on the estimation record). Splits:
+
+| case | input -> output | estimation / validation | literature |
+|---|---|---|---|
+| cascaded_tanks | u -> y, Ts 4 s | estimation.csv / test.csv (standard) | overflow saturation, sqrt outflow |
+| ced_prbs | u1 -> z1, Ts 20 ms | first 300 / last 200 of run 1 (no standard split for PRBS) | output absolute value |
+| emps | vir -> qm, decimated x10 | DATA_EMPS / DATA_EMPS_PULSES (standard), first 8000 ms each | Coulomb friction, offset, integrator |
+| silverbox | u -> y | multisine part: 60000:64000 / 110000:114000 (inside the standard training / test parts) | feedback cubic (negative control) |
+| ball_beam | u -> y, Ts 0.1 s | first / second half | none listed |
+| heat_exchanger | q -> th, Ts 1 s | first / second half | nonlinear, non-minimum phase |
+| robot_arm | u -> y, Ts not given (1) | first / second half | none listed |
+| stiction_loop_XXX | op -> pv, Ts 10 s | first / second half | labels withheld |
+
+F-16 GVT (three outputs, 73728-sample multisines) and HSM150 are not adapted: they
+are not single-input single-output Hammerstein records of a usable length here.
+"""
+
+from pathlib import Path
+
+import numpy as np
+
+from ..io import write_csv
+
+
+def _csv(path: Path) -> dict:
+    with open(path) as f:
+        header = f.readline().strip().split(",")
+    data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
+    return {h: data[:, i] for i, h in enumerate(header)}
+
+
+def _rec(v, y, dt) -> dict:
+    v, y = np.asarray(v, float), np.asarray(y, float)
+    return {"t": np.arange(v.shape[0]) * dt, "v": v, "y": y}
+
+
+def _halves(v, y, dt):
+    n = v.shape[0] // 2
+    return _rec(v[:n], y[:n], dt), _rec(v[n : 2 * n], y[n : 2 * n], dt)
+
+
+def real_cases(root: Path, *, stiction_loops: int | None = None) -> dict:
+    """`{name: (estimation, validation, literature note)}` for every usable dataset
+    under `root` (datasets that are missing are skipped)."""
+    root = Path(root)
+    out = {}
+
+    def have(*parts):
+        return (root.joinpath(*parts)).is_file()
+
+    if have("cascaded_tanks", "estimation.csv"):
+        e, t = (
+            _csv(root / "cascaded_tanks/estimation.csv"),
+            _csv(root / "cascaded_tanks/test.csv"),
+        )
+        out["cascaded_tanks"] = (
+            _rec(e["u"], e["y"], 4.0),
+            _rec(t["u"], t["y"], 4.0),
+            "overflow = hard saturation, sqrt outflow, unknown initial state",
+        )
+    if have("ced_coupled_drives", "DATAPRBS.csv"):
+        c = _csv(root / "ced_coupled_drives/DATAPRBS.csv")
+        out["ced_prbs"] = (
+            _rec(c["u1"][:300], c["z1"][:300], 0.02),
+            _rec(c["u1"][300:], c["z1"][300:], 0.02),
+            "sensor measures |speed| (output absolute value), lightly damped",
+        )
+    if have("emps", "DATA_EMPS.csv") and have("emps", "DATA_EMPS_PULSES.csv"):
+        e = _csv(root / "emps/DATA_EMPS.csv")
+        p = _csv(root / "emps/DATA_EMPS_PULSES.csv")
+        dt = float(e["t"][1] - e["t"][0]) * 10
+        out["emps"] = (
+            _rec(e["vir"][:80000:10][:800], e["qm"][:80000:10][:800], dt),
+            _rec(p["vir"][:80000:10][:800], p["qm"][:80000:10][:800], dt),
+            "asymmetric Coulomb + viscous friction, offset, integrator, closed loop",
+        )
+    if have("silverbox", "silverbox_uy.csv"):
+        s = _csv(root / "silverbox/silverbox_uy.csv")
+        dt = float(s["t"][1] - s["t"][0])
+        out["silverbox"] = (
+            _rec(s["u"][60000:64000], s["y"][60000:64000], dt),
+            _rec(s["u"][110000:114000], s["y"][110000:114000], dt),
+            "cubic stiffness in feedback (not an input nonlinearity): negative control",
+        )
+    for name, folder, file, cols, dt, note in (
+        (
+            "ball_beam",
+            "daisy_ball_beam",
+            "ball-and-beam.csv",
+            ("u", "y"),
+            0.1,
+            "none listed",
+        ),
+        (
+            "heat_exchanger",
+            "daisy_heat_exchanger",
+            "exchanger.csv",
+            ("q", "th"),
+            1.0,
+            "nonlinear, non-minimum phase",
+        ),
+        (
+            "robot_arm",
+            "daisy_robot_arm",
+            "robot-arm.csv",
+            ("u", "y"),
+            1.0,
+            "none listed",
+        ),
+    ):
+        if have(folder, file):
+            d = _csv(root / folder / file)
+            est, val = _halves(d[cols[0]], d[cols[1]], dt)
+            out[name] = (est, val, note)
+    index = root / "stiction_plant_loops" / "index.csv"
+    if index.is_file():
+        files = sorted((root / "stiction_plant_loops" / "csv").glob("loop_*.csv"))
+        for f in files[:stiction_loops]:
+            d = _csv(f)
+            dt = float(d["t"][1] - d["t"][0]) if d["t"].shape[0] > 1 else 10.0
+            if np.ptp(d["op"]) == 0:
+                continue
+            est, val = _halves(d["op"], d["pv"], dt)
+            if np.ptp(est["v"]) == 0 or np.ptp(val["v"]) == 0:
+                continue
+            out[f"stiction_{f.stem}"] = (est, val, "label withheld")
+    return out
+
+
+def _centre(est: dict, val: dict) -> tuple[dict, dict]:
+    """Subtract the estimation record's means of v and y from both records (the
+    nominal structures have no offsets and simulate from rest; the validation
+    record is shifted by the *estimation* means, so nothing is fitted on it)."""
+    mv, my = float(np.mean(est["v"])), float(np.mean(est["y"]))
+    return tuple({"t": r["t"], "v": r["v"] - mv, "y": r["y"] - my} for r in (est, val))
+
+
+def write_real_cases(root: Path, out: Path, **kwargs) -> dict:
+    """Write each adapted dataset as a case folder `out/<name>/`; returns the notes."""
+    notes = {}
+    for name, (est, val, note) in real_cases(root, **kwargs).items():
+        est, val = _centre(est, val)
+        write_csv(Path(out) / name / "estimation.csv", est)
+        write_csv(Path(out) / name / "validation.csv", val)
+        notes[name] = note
+    return notes

@@ -1,0 +1,143 @@
+"""Write `diagnosis.json` (the contract fields and more) and a short `report.md`."""
+
+import math
+from pathlib import Path
+
+from ..io import atomic_write_text, write_json
+
+
+def diagnosis_dict(d) -> dict:
+    """The JSON form of a `GapDiagnosis` (contract fields first)."""
+    return {
+        "effect": d.effect,
+        "gap_before": d.gap_before,
+        "gap_after": d.gap_after,
+        "noise_floor": d.noise_floor,
+        "ranking": d.ranking,
+        "where": d.where,
+        "shrink": d.shrink,
+        "gap_definition": d.gap_definition,
+        "tests": d.tests,
+    }
+
+
+def _clean(x):
+    if isinstance(x, dict):
+        return {k: _clean(v) for k, v in x.items()}
+    if isinstance(x, list | tuple):
+        return [_clean(v) for v in x]
+    if isinstance(x, float) and not math.isfinite(x):
+        return None if math.isnan(x) else (1e308 if x > 0 else -1e308)
+    if hasattr(x, "item"):
+        return _clean(x.item())
+    return x
+
+
+def _significant_axes(where: dict) -> list[str]:
+    b = where["before"]
+    out = []
+    bands = [x for x in b["frequency"] if x["significant"]]
+    if bands:
+        out.append(
+            "frequency: above the floor in "
+            + ", ".join(f"{x['f_low_hz']:.3g}-{x['f_high_hz']:.3g} Hz" for x in bands)
+        )
+    for key, label in (("amplitude_v", "v"), ("amplitude_u", "u")):
+        bins = [x for x in b[key] if x["significant"]]
+        if bins:
+            out.append(
+                f"amplitude ({label}): "
+                + ", ".join(
+                    f"[{x[f'{label}_low']:.3g}, {x[f'{label}_high']:.3g}] "
+                    f"RMS {x['rms_over_floor']:.2g}x floor"
+                    for x in bins
+                )
+            )
+    dirn = b["direction"]
+    if dirn.get("significant"):
+        out.append(
+            f"direction: rising mean {dirn['rising']['mean']:.3g} vs falling "
+            f"{dirn['falling']['mean']:.3g} (z = {dirn['z']:.1f}): memory"
+        )
+    tm = b["time"]
+    out.append(
+        f"time: transient RMS {tm['transient']['rms']:.3g} vs steady "
+        f"{tm['steady']['rms']:.3g}; residual-input correlation peaks at lag "
+        f"{tm['cross_correlation']['max_abs_lag']}"
+        + (" (significant)" if tm["cross_correlation"]["significant"] else "")
+    )
+    if tm["trend"]["significant"]:
+        out.append(f"time: slow trend {tm['trend']['slope_per_s']:.3g} per s")
+    bv = [k for k, x in b["billings_voon"].items() if x["exceeded"]]
+    if bv:
+        out.append("Billings-Voon tests exceeded: " + ", ".join(bv))
+    if "periodic" in b:
+        p = b["periodic"]
+        out.append(
+            f"periodic input: deterministic error RMS {p['deterministic_rms']:.3g}, "
+            f"noise RMS {p['noise_rms']:.3g} (average over periods)"
+        )
+    return out
+
+
+def report_markdown(d, name: str = "case") -> str:
+    """A page a person reads in two minutes."""
+    lines = [
+        f"# Sim-to-real gap: {name}",
+        "",
+        f"**Effect named: `{d.effect}`**",
+        "",
+        f"- gap before (nominal model): {d.gap_before:.4g}",
+        f"- gap after (nominal + named effect, fitted on estimation data): "
+        f"{d.gap_after:.4g}",
+        f"- noise floor: {d.noise_floor:.4g}; shrink "
+        f"(gap_before - gap_after)/(gap_before - noise) = {d.shrink:.2f}",
+        f"- gap measured as: {d.gap_definition}",
+        "",
+        "## Where the gap lies (validation residual of the nominal model)",
+        "",
+    ]
+    lines += [f"- {s}" for s in _significant_axes(d.where)]
+    lines += [
+        "",
+        "## Candidates (best first)",
+        "",
+        "| effect | gap after | measure |",
+        "|---|---|---|",
+    ]
+    for c in d.ranking:
+        lines.append(f"| {c['effect']} | {c['gap_after']:.4g} | {c['measure']} |")
+    chosen = d.ranking[0] if d.effect not in ("none",) else None
+    if chosen is not None:
+        lines += ["", f"## Fitted parameters of `{chosen['effect']}` (value ± std)", ""]
+        for k, x in chosen["params"].items():
+            if k == "nominal_refit":
+                continue
+            lines.append(f"- {k}: {x['value']:.4g} ± {x['std']:.2g}")
+        refit = chosen["params"].get("nominal_refit", {})
+        if refit:
+            lines.append(
+                "- re-fitted nominal: "
+                + ", ".join(f"{k} {x['value']:.4g}" for k, x in refit.items())
+            )
+    lines += ["", "## Significance", ""]
+    for k, x in d.tests.items():
+        lines.append(f"- {k}: " + ", ".join(f"{a}={b}" for a, b in x.items()))
+    lines += [
+        "",
+        "Rule: held-out validation improvement with batch-means z > 3.5 and above "
+        "2 % of the noise variance (see `hamjax.diagnosis.attribute`).",
+        "",
+    ]
+    return "\n".join(lines)
+
+
+def write_diagnosis(d, out: Path, name: str = "case", figures: bool = False) -> None:
+    """Write `diagnosis.json` and `report.md` (and the figures) into `out`."""
+    out.mkdir(parents=True, exist_ok=True)
+    write_json(out / "diagnosis.json", _clean(diagnosis_dict(d)))
+    atomic_write_text(out / "report.md", report_markdown(d, name))
+    if figures:
+        from ..plotting.diagnosis import save_diagnosis_figures
+
+        save_diagnosis_figures(d, out)

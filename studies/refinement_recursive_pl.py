@@ -6,34 +6,13 @@ bias, std, RMSE of closed form vs refined per parameter with the CRLB on the sam
 axes, efficiency CRLB/MSE, refinement failure rate and cost ratio; figures + JSON.
 """
 
-import argparse
 import sys
 
+from hamjax.cli.study import study_main
 
-def main(argv=None) -> int:
-    import matplotlib
 
-    matplotlib.use("Agg")
-    from hamjax.cli.main import main as hamjax_main
-
-    parser = argparse.ArgumentParser(description=__doc__)
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--realisations", "--n-trials", type=int, default=1000)
-    parser.add_argument("--out", default="results/refinement-recursive-pl")
-    args, rest = parser.parse_known_args(argv)
-    return hamjax_main(
-        [
-            "study",
-            "refinement-recursive-pl",
-            "--seed",
-            str(args.seed),
-            "--realisations",
-            str(args.realisations),
-            "--out",
-            args.out,
-            *rest,
-        ]
-    )
+def main(argv: list[str] | None = None) -> int:
+    return study_main("refinement-recursive-pl", argv)
 
 
 if __name__ == "__main__":

@@ -3,6 +3,7 @@ from .csv import (
     sampling_period as sampling_period,
     write_csv as write_csv,
 )
+from .experiment_folder import read_data as read_data, read_design as read_design
 from .files import (
     atomic_write_text as atomic_write_text,
     read_json as read_json,

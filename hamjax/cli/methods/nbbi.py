@@ -9,7 +9,7 @@ import numpy as np
 
 from ..._errors import UserInputError
 from ...identification.nbbi import identify_nbbi, narrow_message
-from ...io import read_csv, read_json, write_csv, write_json
+from ...io import read_data, read_design, write_csv, write_json
 from ...signals import initialisation_step, nbbi_staircase
 from .._common import float_list, positive_float
 
@@ -204,44 +204,3 @@ def _ok(res) -> bool:
     from ..._results import RESULTS
 
     return bool(res.result == RESULTS.successful)
-
-
-def read_design(folder: Path, method: str) -> dict:
-    """experiment.json of `folder`, checked to be a `method` design."""
-    path = folder / "experiment.json"
-    if not path.is_file():
-        raise UserInputError(
-            f"{path}: file not found (run `hamjax experiment {method}`)"
-        )
-    design = read_json(path)
-    if design.get("method") != method:
-        raise UserInputError(
-            f"{path}: method is {design.get('method')!r}, not {method!r}"
-        )
-    return design
-
-
-def read_data(folder: Path, design: dict, v_designed: np.ndarray) -> np.ndarray:
-    """y of data.csv after checking it against the design (length, t, v)."""
-    path = folder / "data.csv"
-    data = read_csv(path, required=("t", "v", "y"))
-    n, dt = v_designed.shape[0], float(design["dt"])
-    t, v = data["t"], data["v"]
-    if t.shape[0] != n:
-        raise UserInputError(
-            f"{path}: {t.shape[0]} rows but experiment.json designs {n} samples"
-        )
-    step = (t[-1] - t[0]) / (n - 1)
-    if abs(t[0]) > 1e-9 * dt or abs(step - dt) > 1e-6 * dt:
-        raise UserInputError(
-            f"{path}: t must start at 0 with step dt = {dt:g} (experiment.json); "
-            f"got t0 = {t[0]:g}, step {step:g}"
-        )
-    bad = np.abs(v - v_designed) > 1e-9 * (1.0 + np.max(np.abs(v_designed)))
-    if bad.any():
-        i = int(np.argmax(bad))
-        raise UserInputError(
-            f"{path}: column v differs from the designed input at line {i + 2} "
-            f"(t = {t[i]:g}): {v[i]:g} vs {v_designed[i]:g}"
-        )
-    return data["y"]

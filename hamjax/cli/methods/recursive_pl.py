@@ -21,7 +21,7 @@ from ...identification.recursive_pl import (
     identify_recursive_pl,
     recover_history,
 )
-from ...io import read_csv, read_json, write_csv, write_json
+from ...io import read_data, read_design, write_csv, write_json
 from ...signals import pe_impulse_sequence
 from .._common import float_list, positive_float, positive_int
 
@@ -129,10 +129,10 @@ def add_identify_arguments(p: argparse.ArgumentParser) -> None:
 
 def identify(args: argparse.Namespace) -> int:
     folder: Path = args.dir
-    design = _read_design(folder)
+    design = read_design(folder, "recursive-pl", ("dt", "levels", "order", "periods"))
     _, v = designed_input(design)
     levels = _levels(design["levels"], design.get("d_max"), f"{folder}/experiment.json")
-    y = _read_data(folder, design, v)
+    y = read_data(folder, design, v)
     try:
         res = identify_recursive_pl(
             v,
@@ -215,48 +215,6 @@ def result_dict(res, *, rho: float, estimator: str) -> dict:
         "normalised by (3.10) (sum b_i^2 = 1, first largest-magnitude entry > 0), "
         "points/k/h/l in that scale; d1, d2 signed (Fig. 2)",
     }
-
-
-def _read_design(folder: Path) -> dict:
-    path = folder / "experiment.json"
-    if not path.is_file():
-        raise UserInputError(
-            f"{path}: file not found (run `hamjax experiment recursive-pl`)"
-        )
-    design = read_json(path)
-    if design.get("method") != "recursive-pl":
-        raise UserInputError(
-            f"{path}: method is {design.get('method')!r}, not 'recursive-pl'"
-        )
-    for key in ("dt", "levels", "order", "periods"):
-        if key not in design:
-            raise UserInputError(f"{path}: missing key {key!r}")
-    return design
-
-
-def _read_data(folder: Path, design: dict, v_designed: np.ndarray) -> np.ndarray:
-    path = folder / "data.csv"
-    data = read_csv(path, required=("t", "v", "y"))
-    n, dt = v_designed.shape[0], float(design["dt"])
-    t, v = data["t"], data["v"]
-    if t.shape[0] != n:
-        raise UserInputError(
-            f"{path}: {t.shape[0]} rows but experiment.json designs {n} samples"
-        )
-    step = (t[-1] - t[0]) / (n - 1)
-    if abs(t[0]) > 1e-9 * dt or abs(step - dt) > 1e-6 * dt:
-        raise UserInputError(
-            f"{path}: t must start at 0 with step dt = {dt:g} (experiment.json); "
-            f"got t0 = {t[0]:g}, step {step:g}"
-        )
-    bad = np.abs(v - v_designed) > 1e-9 * (1.0 + np.max(np.abs(v_designed)))
-    if bad.any():
-        i = int(np.argmax(bad))
-        raise UserInputError(
-            f"{path}: column v differs from the designed input (5.1) at line {i + 2} "
-            f"(t = {t[i]:g}): {v[i]:g} vs {v_designed[i]:g}"
-        )
-    return data["y"]
 
 
 # ----------------------------------------------------------------------------- reproduce

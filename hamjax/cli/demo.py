@@ -64,7 +64,7 @@ def run(args: argparse.Namespace) -> int:
             lines.append(f"## {title}\n\nFAILED (see the console output).\n")
             continue
         lines.append(f"## {title} ({time.perf_counter() - t0:.1f} s)\n")
-        lines.extend(f"- `{name}`: {desc}" for name, desc in made)
+        lines.extend(f"- `{_relative(name, out)}`: {desc}" for name, desc in made)
         lines.append("")
         _write_summary(out, lines, time.perf_counter() - start)
     _write_summary(out, lines, time.perf_counter() - start)
@@ -77,3 +77,12 @@ def _write_summary(out: Path, lines: list[str], elapsed: float) -> None:
 
     head = ["# hamjax demo", "", f"Made by `hamjax demo` in {elapsed:.0f} s.", ""]
     atomic_write_text(out / "summary.md", "\n".join(head + lines) + "\n")
+
+
+def _relative(name, out: Path) -> str:
+    path = Path(name)
+    return (
+        str(path.relative_to(out))
+        if path.is_absolute() and path.is_relative_to(out)
+        else str(name)
+    )

@@ -83,7 +83,7 @@ def test_pure_delay_each_order(order):
     assert y[0] == 0.0  # b[0] = 0: the current input does not reach the output
     impulse = G.response(jnp.zeros(10).at[0].set(1.0))
     # Impulse response: h_0 = b_0 = 0, h_1 = b_1 - a_1 b_0 = b_1.
-    assert impulse[0] == 0.0 and impulse[1] == pytest.approx(b[1], abs=1e-15)
+    assert impulse[0] == 0.0 and impulse[1] == pytest.approx(float(b[1]), abs=1e-15)
 
 
 def test_static_gain_only_numerator():

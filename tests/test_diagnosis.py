@@ -126,6 +126,10 @@ def test_augmented_at_neutral_is_nominal(plant, getkey):
         assert np.allclose(
             y, ref, rtol=1e-9, atol=1e-10 * float(jnp.max(jnp.abs(ref)))
         ), name
+    # the NumPy nominal output (gap_before) is the same simulation
+    assert np.allclose(
+        prep.w_est, ref, rtol=1e-9, atol=1e-10 * float(jnp.max(jnp.abs(ref)))
+    )
 
 
 def test_continuous_block_matches_scipy_zoh():

@@ -97,6 +97,47 @@ def _result(prep, att: Attribution, val: dict) -> GapDiagnosis:
     )
 
 
+REFIT = "parameter_mismatch"
+CONTINUE_STEPS = 120
+
+
+def _continue_stopped(padded: list, rows, cases, fits):
+    """Continue, per case, the nominal re-fit row and the best (lowest estimation
+    SSE) structural row if they stopped at the step limit.
+
+    The re-fit row is the reference every structural candidate is tested against,
+    so an unfinished one lets a structural row look significant, and an unfinished
+    best structural row lets the re-fit win. Those rows only are fitted again from
+    where they stopped (one `[case, 2]` batch, compiled only when some case needs
+    it), with `CONTINUE_STEPS` more steps.
+    """
+    result = np.asarray(fits.result)
+    sse = np.where(np.isfinite(fits.sse_est), fits.sse_est, np.inf)
+    pick = []
+    for c, p in enumerate(padded):
+        names = [name for name, _ in p.rows]
+        i_pm = names.index(REFIT)
+        others = [k for k, name in enumerate(names) if name != REFIT]
+        i_s = min(others, key=lambda k: sse[c, k])
+        pick.append([i_pm, i_s if result[c, i_s] else i_pm])
+    pick = np.asarray(pick)
+    cidx = np.arange(len(padded))[:, None]
+    stopped = result[cidx, pick] != 0
+    if not np.any(stopped):
+        return fits
+    sel = jtu.tree_map(lambda x: x[cidx, pick], rows)
+    sel = eqx.tree_at(lambda r: r.theta0, sel, jnp.asarray(fits.theta)[cidx, pick])
+    more = jax.device_get(fit_cases(sel, cases, CONTINUE_STEPS))
+
+    def merge(old, new):
+        old = np.array(old)
+        keep = stopped.reshape(stopped.shape + (1,) * (old.ndim - 2))
+        old[cidx, pick] = np.where(keep, np.asarray(new), old[cidx, pick])
+        return old
+
+    return jtu.tree_map(merge, fits, more)
+
+
 def diagnose_many(
     items: list[tuple[Hammerstein, float, dict, dict]], *, chunk: int = 8
 ) -> list[GapDiagnosis]:
@@ -134,6 +175,7 @@ def diagnose_many(
             )
             cases = jtu.tree_map(lambda *x: jnp.stack(x), *[p.arrays for p in padded])
             fits = jax.device_get(fit_cases(rows, cases))
+            fits = _continue_stopped(padded, rows, cases, fits)
             for j, i in enumerate(part):
                 fit = {
                     k: np.asarray(getattr(fits, k))[j]

@@ -5,6 +5,8 @@ from dataclasses import dataclass
 
 import jax.numpy as jnp
 import numpy as np
+import scipy.linalg
+import scipy.signal
 
 from ..models import (
     ContinuousTransferFunction,
@@ -344,22 +346,28 @@ def _delay_shortlist(y: np.ndarray, w: np.ndarray, keep: int = 2) -> tuple[int, 
     return tuple(int(i) + 1 for i in np.argsort(sse)[:keep])
 
 
+def _zoh_numpy(num: np.ndarray, den: np.ndarray, dt: float):
+    """Exact zero-order-hold discretisation of `num/den` (the controllable canonical
+    form of `ContinuousTransferFunction.discretise`, in NumPy/SciPy: the JAX version
+    recompiled on every call, ~1 s per continuous case)."""
+    A, B, C, D = scipy.signal.tf2ss(num, den)
+    n = A.shape[0]
+    M = np.zeros((n + 1, n + 1))
+    M[:n, :n], M[:n, n:] = A * dt, B * dt
+    E = scipy.linalg.expm(M)
+    return E[:n, :n], E[:n, n:], C, D
+
+
 def _response_numpy(linear, u: np.ndarray, dt: float) -> np.ndarray:
     """Nominal linear response from rest (NumPy: no compilation per record length)."""
     if isinstance(linear, ContinuousTransferFunction):
-        ss = linear.discretise(dt)
-        A, B, C, D = (np.asarray(x) for x in (ss.A, ss.B, ss.C, ss.D))
+        A, B, C, D = _zoh_numpy(np.asarray(linear.num), np.asarray(linear.den), dt)
     else:
         b, a = np.asarray(linear.b), np.asarray(linear.a)
         n = max(a.shape[0], b.shape[0])
         b = np.r_[b, np.zeros(n - b.shape[0])]
         a = np.r_[a, np.zeros(n - a.shape[0])]
-        if n == 1:
-            return b[0] * u
-        A = np.vstack([-a[1:][None, :], np.eye(n - 2, n - 1)])
-        B = np.eye(n - 1, 1)
-        C = (b[1:] - a[1:] * b[0])[None, :]
-        D = np.array([[b[0]]])
+        return scipy.signal.lfilter(b, a, np.asarray(u, float))  # a[0] == 1
     x = np.zeros(A.shape[0])
     y = np.empty(u.shape[0])
     Bc, Cr, d = B[:, 0], C[0], float(D[0, 0])

@@ -36,23 +36,12 @@ from ..models import (
     PiecewiseLinear,
     Tabulated,
 )
+from .attribute import DETERMINISTIC_NAMES, NOISE_NAMES
 
 
-EFFECTS = (
-    "none",
-    "parameter_mismatch",
-    "backlash",
-    "dead_zone",
-    "saturation",
-    "preload",
-    "rate_limit",
-    "time_delay",
-    "extra_pole",
-    "output_nonlinearity",
-    "drift",
-    "coloured_noise",
-)
-DETERMINISTIC = EFFECTS[1:10]
+# The contract's names, in its order: none, the deterministic effects, the noise ones.
+EFFECTS = ("none", *DETERMINISTIC_NAMES, *NOISE_NAMES)
+DETERMINISTIC = DETERMINISTIC_NAMES
 
 
 class _Draw:

@@ -135,3 +135,18 @@ def plot_closed_form_vs_refined(
     ax.legend(fontsize=7)
     fig.tight_layout()
     return fig
+
+
+def save_refinement_study(summary: dict, out, stem: str) -> None:
+    """Write `<stem>_rmse.png`, `<stem>_efficiency.png` and `<stem>.json` into `out`."""
+    from pathlib import Path
+
+    from ..io import write_json
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    for which in ("rmse", "efficiency"):
+        fig = plot_refinement_study(summary, which=which)
+        fig.savefig(out / f"{stem}_{which}.png", dpi=110)
+        plt.close(fig)
+    write_json(out / f"{stem}.json", summary)

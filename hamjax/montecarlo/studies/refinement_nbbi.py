@@ -22,7 +22,6 @@ import numpy as np
 
 from ...identification.nbbi import identify_nbbi
 from ...internal.defaults import seed000_plant
-from ...io import write_json
 from ...models import apply_nonlinearity, noise_std_for_snr
 from ...refinement import (
     BacklashPathParametrisation,
@@ -136,9 +135,8 @@ def _time_per_estimate(fn, keys) -> float:
 
 
 def run(key, *, realisations: int, chunk: int, out: Path, quiet: bool, args) -> dict:
-    import matplotlib.pyplot as plt
 
-    from ...plotting.refinement import plot_refinement_study
+    from ...plotting.refinement import save_refinement_study
 
     holds = [float(x) for x in str(getattr(args, "holds", "5,10,20,40")).split(",")]
     snrs = [float(x) for x in str(getattr(args, "snrs", "20,40")).split(",")]
@@ -240,11 +238,5 @@ def run(key, *, realisations: int, chunk: int, out: Path, quiet: bool, args) -> 
         )
         + f"; cost ratio {t_ref / t_cf:.0f}"
     )
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    for which in ("rmse", "efficiency"):
-        fig = plot_refinement_study(summary, which=which)
-        fig.savefig(out / f"refinement_nbbi_{which}.png", dpi=110)
-        plt.close(fig)
-    write_json(out / "refinement_nbbi.json", summary)
+    save_refinement_study(summary, out, "refinement_nbbi")
     return summary

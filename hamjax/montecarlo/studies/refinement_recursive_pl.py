@@ -31,7 +31,6 @@ from ...identification.recursive_pl import (
     regressor,
 )
 from ...internal.defaults import seed001_plant
-from ...io import write_json
 from ...models import noise_std_for_snr
 from ...refinement import (
     ImpulseTableParametrisation,
@@ -141,9 +140,8 @@ def _time_per_estimate(fn, keys) -> float:
 
 
 def run(key, *, realisations: int, chunk: int, out: Path, quiet: bool, args) -> dict:
-    import matplotlib.pyplot as plt
 
-    from ...plotting.refinement import plot_refinement_study
+    from ...plotting.refinement import save_refinement_study
 
     periods = [
         int(x) for x in str(getattr(args, "periods", "10,30,100,300")).split(",")
@@ -266,11 +264,5 @@ def run(key, *, realisations: int, chunk: int, out: Path, quiet: bool, args) -> 
         )
         + f"; cost ratio {t_ref / t_cf:.1f}"
     )
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    for which in ("rmse", "efficiency"):
-        fig = plot_refinement_study(summary, which=which)
-        fig.savefig(out / f"refinement_recursive_pl_{which}.png", dpi=110)
-        plt.close(fig)
-    write_json(out / "refinement_recursive_pl.json", summary)
+    save_refinement_study(summary, out, "refinement_recursive_pl")
     return summary

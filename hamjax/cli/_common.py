@@ -2,7 +2,6 @@
 
 import argparse
 import math
-from pathlib import Path
 
 
 def float_list(text: str) -> list[float]:
@@ -38,19 +37,3 @@ def positive_int(text: str) -> int:
     if x < 1:
         raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text!r}")
     return x
-
-
-def add_seed(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument(
-        "--seed", type=int, default=0, help="root random seed (default 0)"
-    )
-
-
-def add_out(parser: argparse.ArgumentParser, default: str | None = None) -> None:
-    parser.add_argument(
-        "--out",
-        type=Path,
-        default=None if default is None else Path(default),
-        required=default is None,
-        help="output folder",
-    )

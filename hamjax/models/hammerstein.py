@@ -1,7 +1,6 @@
 """The Hammerstein plant $v \\to F \\to u \\to G \\to w$."""
 
 import equinox as eqx
-from jaxtyping import Array, Float
 
 from .._checks import concrete
 from .linear import AbstractLinearBlock
@@ -66,8 +65,3 @@ def normalise_static_gain(plant: Hammerstein) -> Hammerstein:
     return Hammerstein(
         scale_nonlinearity(plant.nonlinearity, k), plant.linear.scaled(1 / k)
     )
-
-
-def static_gain(plant: Hammerstein) -> Float[Array, ""]:
-    """$G(0)$ of the plant's linear block."""
-    return plant.linear.static_gain()

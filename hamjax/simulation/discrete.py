@@ -18,13 +18,12 @@ from ..models import (
 
 def check_stable(linear: AbstractLinearBlock, what: str = "the linear block") -> None:
     """Raise `ValueError` if a concrete `linear` block is unstable."""
-    coefficients = getattr(
-        linear, "a", getattr(linear, "den", getattr(linear, "A", None))
-    )
-    if coefficients is None or concrete(coefficients) is None:
+    try:
+        poles = linear.poles()
+    except ValueError:  # traced coefficients (under jit): nothing to check here
         return
     if not linear.is_stable():
-        poles = ", ".join(f"{p:.4g}" for p in linear.poles())
+        poles = ", ".join(f"{p:.4g}" for p in poles)
         region = (
             "|p| < 1"
             if not isinstance(linear, ContinuousTransferFunction)

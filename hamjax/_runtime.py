@@ -19,3 +19,27 @@ def avoid_eigen_pool_hang() -> None:
     flags = os.environ.get("XLA_FLAGS", "")
     if "xla_cpu_multi_thread_eigen" not in flags:
         os.environ["XLA_FLAGS"] = f"{flags} {_EIGEN_FLAG}".strip()
+
+
+_DEVICES_FLAG = "--xla_force_host_platform_device_count"
+
+
+def split_cpu_into_devices() -> None:
+    """Expose each CPU core as a JAX device, so work sharded over devices (the
+    diagnosis's batched fits) runs on every core.
+
+    Only when the user has not set the device count and JAX's backend has not
+    started yet (XLA reads the flag once); otherwise a no-op. Code paths that do
+    not shard keep running on device 0, as before.
+    """
+    import jax._src.xla_bridge as xb
+
+    flags = os.environ.get("XLA_FLAGS", "")
+    if _DEVICES_FLAG in flags or xb.backends_are_initialized():
+        return
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        cores = os.cpu_count() or 1
+    if cores > 1:
+        os.environ["XLA_FLAGS"] = f"{flags} {_DEVICES_FLAG}={cores}".strip()

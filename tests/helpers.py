@@ -51,3 +51,33 @@ def random_stable_poly(rng_values, radius: float = 0.95) -> np.ndarray:
     if x:
         roots.append(x.pop() * radius)
     return np.real(np.poly(roots)) if roots else np.ones(1)
+
+
+def run_on_two_devices(script: str, tmp_path, *, timeout: float = 600):
+    """Run `script` (Python source; `sys.argv[1]` is an output `.npz` path) in a
+    child process that sees 2 forced host CPU devices; return the loaded `.npz`."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    repo = Path(__file__).resolve().parents[1]
+    path = tmp_path / "child.py"
+    path.write_text(script)
+    env = {
+        **os.environ,
+        "XLA_FLAGS": "--xla_force_host_platform_device_count=2",
+        "JAX_PLATFORMS": "cpu",
+        "PYTHONPATH": str(repo),
+    }
+    out = tmp_path / "child_result.npz"
+    proc = subprocess.run(
+        [sys.executable, str(path), str(out)],
+        env=env,
+        cwd=repo,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+    )
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return np.load(out)

@@ -1,19 +1,14 @@
 """Sharding the realisation axis over 2 (forced host) devices gives the 1-device numbers."""
 
-import os
-import subprocess
-import sys
 import textwrap
-from pathlib import Path
 
 import jax
 import jax.random as jr
 import numpy as np
+from helpers import run_on_two_devices
 
 from hamjax.montecarlo import MonteCarloConfig, run_monte_carlo
 
-
-REPO = Path(__file__).resolve().parents[1]
 
 TRIAL = textwrap.dedent(
     """
@@ -50,25 +45,7 @@ CHILD = TRIAL + textwrap.dedent(
 
 
 def test_two_devices_give_the_single_device_numbers(tmp_path):
-    script = tmp_path / "child.py"
-    script.write_text(CHILD)
-    env = {
-        **os.environ,
-        "XLA_FLAGS": "--xla_force_host_platform_device_count=2",
-        "JAX_PLATFORMS": "cpu",
-        "PYTHONPATH": str(REPO),
-    }
-    result_file = tmp_path / "sharded.npz"
-    proc = subprocess.run(
-        [sys.executable, str(script), str(result_file)],
-        env=env,
-        cwd=REPO,
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    sharded = np.load(result_file)
+    sharded = run_on_two_devices(CHILD, tmp_path, timeout=300)
     assert int(sharded["devices"]) == 2  # the chunk really was split over both
 
     namespace: dict = {}

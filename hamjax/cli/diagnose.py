@@ -22,6 +22,9 @@ def register(sub) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from .._runtime import split_cpu_into_devices
+
+    split_cpu_into_devices()  # before the first computation
     from .._errors import UserInputError
     from ..diagnosis.case import read_case
     from ..diagnosis.diagnose import diagnose_many
@@ -48,19 +51,22 @@ def run(args: argparse.Namespace) -> int:
             print(f"hamjax: error: {err}", file=sys.stderr)
             failed += 1
     if items:
-        try:
-            results = diagnose_many(items)
-        except ValueError as err:
-            raise UserInputError(
-                f"{args.cases[0] if single else 'cases'}: {err}"
-            ) from None
-        for (name, out), d in zip(names, results, strict=False):
+
+        def write(i, d):  # each case is written as soon as its chunk is done
+            name, out = names[i]
             write_diagnosis(d, out, name, figures=args.figures)
             if not args.quiet:
                 print(
                     f"{name}: {d.effect} (gap {d.gap_before:.4g} -> {d.gap_after:.4g}, "
                     f"noise {d.noise_floor:.4g})"
                 )
+
+        try:
+            diagnose_many(items, on_result=write)
+        except ValueError as err:
+            raise UserInputError(
+                f"{args.cases[0] if single else 'cases'}: {err}"
+            ) from None
     if not args.quiet:
         n = len(items)
         print(

@@ -76,6 +76,10 @@ def run(args: argparse.Namespace) -> int:
 
 def run_study(study, args: argparse.Namespace) -> int:
     """Run `study` with parsed `args`; print where the results are."""
+    from .._runtime import split_cpu_into_devices
+
+    if study.split_cpu:  # its batched fits shard over devices
+        split_cpu_into_devices()
     import jax.random as jr
 
     from .._x64 import enable_x64

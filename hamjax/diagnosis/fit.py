@@ -4,8 +4,11 @@ batched over rows and cases so that one compilation serves a whole call."""
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
+from jax.sharding import Mesh, PartitionSpec
 from jaxtyping import Array, Float, Int
 
+from .._linalg import cholesky_solve
 from .augmented import CaseArrays, Row, full_parameters, simulate_row
 
 
@@ -50,6 +53,7 @@ def levenberg_marquardt(theta0, args, max_steps: int):
     """
     P = theta0.shape[0]
     n = args[1].v_est.shape[0]
+    max_steps = jnp.asarray(max_steps)
 
     def cond(state):
         return (state[-2] < max_steps) & ~state[-1]
@@ -67,7 +71,7 @@ def levenberg_marquardt(theta0, args, max_steps: int):
         lam = jnp.where(better, lam / 3, lam * 4)
         H = J.T @ J
         d = jnp.diag(H) + 1e-12
-        step = -jnp.linalg.solve(H + lam * jnp.diag(d), J.T @ r)
+        step = -cholesky_solve(H + lam * jnp.diag(d), J.T @ r)
         done = (better & small) | (lam > 1e10) | (jnp.max(jnp.abs(step)) < 1e-12)
         return theta, theta + step, r, J, cost_new, lam, k + 1, done
 
@@ -85,16 +89,19 @@ def levenberg_marquardt(theta0, args, max_steps: int):
     return theta, r, J, done
 
 
-def fit_row(row: Row, case: CaseArrays, max_steps: int = 30) -> RowFit:
+def fit_row(row: Row, case: CaseArrays, max_steps=30) -> RowFit:
     """Fit one row from `row.theta0` (the nominal slots start at nominal)."""
     theta, r, J, done = levenberg_marquardt(row.theta0, (row, case), max_steps)
     sse = jnp.sum(r**2) * case.y_scale**2
     n = jnp.sum(case.m_est)
     used = row.idx < case.anchor.shape[0]
     dof = jnp.maximum(n - jnp.sum(used), 1.0)
-    JtJ = J.T @ J + jnp.diag(jnp.where(used, 1e-12, 1.0))
-    cov = jnp.linalg.solve(JtJ, jnp.eye(JtJ.shape[0])) * (jnp.sum(r**2) / dof)
-    theta_std = jnp.where(used, jnp.sqrt(jnp.abs(jnp.diag(cov))), 0.0)
+    JtJ = J.T @ J
+    JtJ = JtJ + jnp.diag(jnp.where(used, 1e-12 * (1.0 + jnp.diag(JtJ)), 1.0))
+    cov = cholesky_solve(JtJ, jnp.eye(JtJ.shape[0])) * (jnp.sum(r**2) / dof)
+    var = jnp.diag(cov)
+    # an unidentifiable direction (a pivot lost to rounding) gets an infinite std
+    theta_std = jnp.where(used, jnp.where(var >= 0, jnp.sqrt(var), jnp.inf), 0.0)
     params = full_parameters(theta, row, case)
     y_est = case.y_est + r * case.y_scale
     y_val = simulate_row(theta, row, case.v_val, case)
@@ -111,14 +118,53 @@ def fit_row(row: Row, case: CaseArrays, max_steps: int = 30) -> RowFit:
 
 
 @eqx.filter_jit
-def fit_rows(rows: Row, case: CaseArrays, max_steps: int = 30) -> RowFit:
+def fit_rows(rows: Row, case: CaseArrays, max_steps=30) -> RowFit:
     """All rows (stacked along axis 0) of one case."""
     return jax.vmap(lambda r: fit_row(r, case, max_steps))(rows)
 
 
-@eqx.filter_jit
-def fit_cases(rows: Row, cases: CaseArrays, max_steps: int = 30) -> RowFit:
-    """All rows of several cases (both stacked along axis 0: `[case, row]`, `[case]`)."""
+def _fit_grid(rows: Row, cases: CaseArrays, max_steps) -> RowFit:
     return jax.vmap(lambda rs, c: jax.vmap(lambda r: fit_row(r, c, max_steps))(rs))(
         rows, cases
     )
+
+
+@eqx.filter_jit
+def _fit_grid_jit(rows, cases, max_steps):
+    return _fit_grid(rows, cases, max_steps)
+
+
+@eqx.filter_jit
+def _fit_grid_sharded(rows, cases, max_steps, axis: int):
+    devices = np.asarray(jax.devices())
+    mesh = Mesh(devices, ("d",))
+    spec_rows = PartitionSpec("d") if axis == 0 else PartitionSpec(None, "d")
+    spec_cases = PartitionSpec("d") if axis == 0 else PartitionSpec()
+    # `check_vma=False`: the per-device bodies are independent (no collectives);
+    # each device runs its own Levenberg-Marquardt loop to its own convergence.
+    fn = jax.shard_map(
+        lambda r, c, m: _fit_grid(r, c, m),
+        mesh=mesh,
+        in_specs=(spec_rows, spec_cases, PartitionSpec()),
+        out_specs=spec_rows,
+        check_vma=False,
+    )
+    return fn(rows, cases, max_steps)
+
+
+def fit_cases(rows: Row, cases: CaseArrays, max_steps: int = 30) -> RowFit:
+    """All rows of several cases (both stacked along axis 0: `[case, row]`, `[case]`).
+
+    With several devices (e.g. `XLA_FLAGS=--xla_force_host_platform_device_count=2`
+    on a 2-core CPU, as `hamjax diagnose` sets) the cases, or failing that the rows,
+    are split over them; the split changes only rounding.
+    `max_steps` is traced, so changing it does not recompile.
+    """
+    steps = jnp.asarray(max_steps, dtype=jnp.int32)
+    n_dev = jax.device_count()
+    n_cases, n_rows = rows.theta0.shape[:2]
+    if n_dev > 1 and n_cases % n_dev == 0:
+        return _fit_grid_sharded(rows, cases, steps, 0)
+    if n_dev > 1 and n_rows % n_dev == 0:
+        return _fit_grid_sharded(rows, cases, steps, 1)
+    return _fit_grid_jit(rows, cases, steps)

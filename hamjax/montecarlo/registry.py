@@ -5,7 +5,9 @@ A study module defines
 - `NAME: str` (the command-line name, e.g. `"simulation-throughput"`),
 - `DESCRIPTION: str` (one line, shown by `hamjax study --list`),
 - optional `add_arguments(parser)` for study-specific options, optional
-  `DEFAULT_REALISATIONS` and `DEFAULT_CHUNK`,
+  `DEFAULT_REALISATIONS` and `DEFAULT_CHUNK`, optional `SPLIT_CPU = True` when
+  its work shards over devices and `hamjax study` should expose each CPU core as
+  a JAX device before starting,
 - `run(key, *, realisations, chunk, out, quiet, args) -> dict`, which writes its
   figures and a JSON summary into the folder `out` and returns the summary.
 
@@ -32,6 +34,7 @@ class Study:
     add_arguments: Callable[[Any], None] | None = None
     default_realisations: int = 1000
     default_chunk: int = 256
+    split_cpu: bool = False
 
 
 _REGISTERED: dict[str, Study] = {}
@@ -101,6 +104,7 @@ def _from_module(module) -> Study:
         add_arguments=getattr(module, "add_arguments", None),
         default_realisations=getattr(module, "DEFAULT_REALISATIONS", 1000),
         default_chunk=getattr(module, "DEFAULT_CHUNK", 256),
+        split_cpu=bool(getattr(module, "SPLIT_CPU", False)),
     )
 
 

@@ -14,6 +14,7 @@ DESCRIPTION = (
 )
 DEFAULT_REALISATIONS = 240
 DEFAULT_CHUNK = 8
+SPLIT_CPU = True  # `hamjax study` exposes each core as a device first
 
 
 def add_arguments(parser) -> None:

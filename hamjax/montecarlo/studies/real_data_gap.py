@@ -11,6 +11,7 @@ DESCRIPTION = (
 )
 DEFAULT_REALISATIONS = 80  # stiction loops included
 DEFAULT_CHUNK = 8
+SPLIT_CPU = True  # `hamjax study` exposes each core as a device first
 
 
 def add_arguments(parser) -> None:

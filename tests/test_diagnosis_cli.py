@@ -43,6 +43,9 @@ BAD = {
     "constant": lambda f: (f / "estimation.csv").write_text(
         "t,v,y\n" + "\n".join(f"{k * 0.05},1.0,{k}" for k in range(100))
     ),
+    "dead_sensor": lambda f: (f / "validation.csv").write_text(
+        "t,v,y\n" + "\n".join(f"{k * 0.05},{np.sin(k)},3.5e-44" for k in range(100))
+    ),
     "kind": lambda f: (f / "model.json").write_text(
         json.dumps(
             {"nonlinearity": {"kind": "spline"}, "linear": {"kind": "discrete_tf"}}

@@ -32,6 +32,8 @@ def _check_record(path: Path, rec: dict) -> float:
         raise UserInputError(f"{path}: only {n} samples (need at least {MIN_SAMPLES})")
     if np.ptp(rec["v"]) == 0:
         raise UserInputError(f"{path}: input v is constant (nothing to identify)")
+    if np.ptp(rec["y"]) == 0:
+        raise UserInputError(f"{path}: output y is constant (a dead sensor?)")
     return float(rec["t"][1] - rec["t"][0])
 
 
@@ -40,7 +42,7 @@ def read_case(folder: str | Path) -> GapCase:
 
     **Raises:** `UserInputError` naming the file and the problem (missing or
     malformed CSV, NaN/inf, non-uniform `t`, different `dt` in the two records,
-    constant input, unknown model kind, a model `dt` that differs from the data).
+    constant input or output, unknown model kind, a model `dt` that differs from the data).
     """
     folder = Path(folder)
     if not folder.is_dir():

@@ -3,7 +3,7 @@
 Each adapter reads the dataset in place (never copied into the repository), picks
 the input/output columns, applies the split below and writes
 `estimation.csv`/`validation.csv` with the estimation record's means of v and y
-removed from both (no `model.json`: the default nominal model of
+removed from both (except HSM150, whose records start at rest; no `model.json`: the default nominal model of
 `nominal_fit` is fitted on the estimation record). Splits:
 
 | case | input -> output | estimation / validation | literature |
@@ -15,10 +15,10 @@ removed from both (no `model.json`: the default nominal model of
 | ball_beam | u -> y, Ts 0.1 s | first / second half | none listed |
 | heat_exchanger | q -> th, Ts 1 s | first / second half | nonlinear, non-minimum phase |
 | robot_arm | u -> y, Ts not given (1) | first / second half | none listed |
+| f16_level3_to_2 | Force -> Acceleration2, 400 Hz block-averaged x8 | level 3 / level 2 (standard), second period each | clearance + friction in feedback, ~10 modes |
+| hsm150_pos, hsm150_neg | torque_in -> vel, 1 ms decimated x10 | step to 0.06 / 0.065 N m; to -0.04 / -0.045 N m | none documented |
+| hsm150_pos_to_neg | torque_in -> vel | step to 0.06 / step to -0.04 N m (opposite operating points) | asymmetric friction plausible |
 | stiction_loop_XXX | op -> pv, Ts 10 s | first / second half | labels withheld |
-
-F-16 GVT (three outputs, 73728-sample multisines) and HSM150 are not adapted: they
-are not single-input single-output Hammerstein records of a usable length here.
 """
 
 from pathlib import Path
@@ -33,6 +33,13 @@ def _csv(path: Path) -> dict:
         header = f.readline().strip().split(",")
     data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
     return {h: data[:, i] for i, h in enumerate(header)}
+
+
+def _f16_columns(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """Force and Acceleration2 (next to the nonlinear interface) of an F-16 CSV
+    (quoted header, `Fs` only in row 1, trailing empty column)."""
+    data = np.loadtxt(path, delimiter=",", skiprows=1, usecols=(0, 3), ndmin=2)
+    return data[:, 0], data[:, 1]
 
 
 def _rec(v, y, dt) -> dict:
@@ -118,17 +125,51 @@ def real_cases(root: Path, *, stiction_loops: int | None = None) -> dict:
             d = _csv(root / folder / file)
             est, val = _halves(d[cols[0]], d[cols[1]], dt)
             out[name] = (est, val, note)
+    f16 = root / "f16_gvt"
+    level3, level2 = (
+        f16 / "F16Data_FullMSine_Level3.csv",
+        f16 / "F16Data_FullMSine_Level2_Validation.csv",
+    )
+    if level3.is_file() and level2.is_file():
+        # standard split: estimate on level 3, test on level 2; the second of the
+        # 9 periods of 8192 samples (the first holds transients), block-averaged
+        # by 8 (400 -> 50 Hz; the multisine spans 2-15 Hz)
+        def period(path):
+            x = _f16_columns(path)
+            seg = slice(8192, 2 * 8192)
+            return [c[seg].reshape(-1, 8).mean(axis=1) for c in x]
+
+        (fe, ae), (fv, av) = period(level3), period(level2)
+        out["f16_level3_to_2"] = (
+            _rec(fe, ae, 8 / 400),
+            _rec(fv, av, 8 / 400),
+            "clearance + friction at the payload interface, in feedback (not an "
+            "input nonlinearity); about 10 modes in 2-15 Hz",
+        )
+    hsm = root / "hsm150_two_motor"
+    for name, est_file, val_file in (
+        ("hsm150_pos", "idf_pos_0.06_1.csv", "idf_pos_0.065_1.csv"),
+        ("hsm150_neg", "idf_neg_0.04_1.csv", "idf_neg_0.045_1.csv"),
+        ("hsm150_pos_to_neg", "idf_pos_0.06_1.csv", "idf_neg_0.04_1.csv"),
+    ):
+        if (hsm / est_file).is_file() and (hsm / val_file).is_file():
+            # torque in -> velocity, from rest, 1 ms sampling decimated by 10
+            e, v = _csv(hsm / est_file), _csv(hsm / val_file)
+            out[name] = (
+                _rec(e["torque_in"][::10], e["vel"][::10], 0.01),
+                _rec(v["torque_in"][::10], v["vel"][::10], 0.01),
+                "none documented; friction / asymmetric breakaway plausible "
+                "(operating points of opposite sign), not confirmed",
+            )
     index = root / "stiction_plant_loops" / "index.csv"
     if index.is_file():
         files = sorted((root / "stiction_plant_loops" / "csv").glob("loop_*.csv"))
         for f in files[:stiction_loops]:
             d = _csv(f)
             dt = float(d["t"][1] - d["t"][0]) if d["t"].shape[0] > 1 else 10.0
-            if np.ptp(d["op"]) == 0:
-                continue
             est, val = _halves(d["op"], d["pv"], dt)
-            if np.ptp(est["v"]) == 0 or np.ptp(val["v"]) == 0:
-                continue
+            if min(np.ptp(r[k]) for r in (est, val) for k in ("v", "y")) == 0:
+                continue  # constant op, or a dead pv sensor (e.g. loops 062, 066)
             out[f"stiction_{f.stem}"] = (est, val, "label withheld")
     return out
 
@@ -141,11 +182,15 @@ def _centre(est: dict, val: dict) -> tuple[dict, dict]:
     return tuple({"t": r["t"], "v": r["v"] - mv, "y": r["y"] - my} for r in (est, val))
 
 
+FROM_REST = ("hsm150",)  # records that start at rest: kept uncentred
+
+
 def write_real_cases(root: Path, out: Path, **kwargs) -> dict:
     """Write each adapted dataset as a case folder `out/<name>/`; returns the notes."""
     notes = {}
     for name, (est, val, note) in real_cases(root, **kwargs).items():
-        est, val = _centre(est, val)
+        if not name.startswith(FROM_REST):
+            est, val = _centre(est, val)
         write_csv(Path(out) / name / "estimation.csv", est)
         write_csv(Path(out) / name / "validation.csv", val)
         notes[name] = note

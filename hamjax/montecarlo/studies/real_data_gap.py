@@ -36,12 +36,13 @@ def run(key, *, realisations, chunk, out, quiet, args) -> dict:
     notes = write_real_cases(args.data, out / "cases", stiction_loops=realisations)
     names = sorted(notes)
     start = time.perf_counter()
-    items, kept = [], []
+    items, kept, skipped = [], [], {}
     for n in names:
-        c = read_case(out / "cases" / n)
-        try:
+        try:  # a record the diagnosis refuses is reported, not fatal
+            c = read_case(out / "cases" / n)
             plant = fit_nominal(c.dt, c.estimation)
-        except ValueError:
+        except ValueError as err:
+            skipped[n] = str(err)
             continue
         write_json(
             out / "results" / n / "nominal_model.json", model_to_dict(plant, c.dt)
@@ -67,8 +68,16 @@ def run(key, *, realisations, chunk, out, quiet, args) -> dict:
             f"| {n} | {d.effect} | {d.gap_before:.4g} | {d.gap_after:.4g} | "
             f"{d.noise_floor:.4g} | {notes[n]} |"
         )
+    for n, why in skipped.items():
+        rows.append(
+            f"| {n} | not diagnosed: {why.split(': ', 1)[-1]} | | | | {notes[n]} |"
+        )
     atomic_write_text(out / "table.md", "\n".join(rows) + "\n")
-    summary = {"cases": table, "seconds": time.perf_counter() - start}
+    summary = {
+        "cases": table,
+        "skipped": skipped,
+        "seconds": time.perf_counter() - start,
+    }
     write_json(out / "summary.json", summary)
     if not quiet:
         print("\n".join(rows))

@@ -43,3 +43,30 @@ def split_cpu_into_devices() -> None:
         cores = os.cpu_count() or 1
     if cores > 1:
         os.environ["XLA_FLAGS"] = f"{flags} {_DEVICES_FLAG}={cores}".strip()
+
+
+def use_compilation_cache() -> None:
+    """Keep XLA's compiled programs on disk between `hamjax` runs.
+
+    The diagnosis compiles its batched fits for ~10 s per record-length group;
+    with the cache a later call with the same shapes skips that. The folder is
+    `$HAMJAX_CACHE_DIR`, else `$XDG_CACHE_HOME/hamjax/xla` (default
+    `~/.cache/hamjax/xla`); `HAMJAX_CACHE_DIR=off` disables it. Only programs that
+    took over a second to compile are stored. Results do not depend on it.
+    """
+    import jax
+
+    where = os.environ.get("HAMJAX_CACHE_DIR")
+    if where is not None and where.strip().lower() in ("", "0", "off", "none"):
+        return
+    if where is None:
+        base = os.environ.get("XDG_CACHE_HOME") or os.path.join(
+            os.path.expanduser("~"), ".cache"
+        )
+        where = os.path.join(base, "hamjax", "xla")
+    try:
+        os.makedirs(where, exist_ok=True)
+    except OSError:
+        return  # a read-only home: run without the cache
+    jax.config.update("jax_compilation_cache_dir", where)
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)

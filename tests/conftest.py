@@ -10,6 +10,8 @@ from hamjax._runtime import avoid_eigen_pool_hang
 
 
 avoid_eigen_pool_hang()  # before jax starts its backend; see the docstring
+# CLI calls inside tests must not write XLA programs into the user's cache
+os.environ.setdefault("HAMJAX_CACHE_DIR", "off")
 
 import jax  # noqa: E402
 import jax.random as jr  # noqa: E402

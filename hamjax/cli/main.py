@@ -49,11 +49,12 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the console script and of `python -m hamjax`."""
     from .._errors import UserInputError
-    from .._runtime import avoid_eigen_pool_hang
+    from .._runtime import avoid_eigen_pool_hang, use_compilation_cache
     from .._x64 import enable_x64
 
     avoid_eigen_pool_hang()
     enable_x64()
+    use_compilation_cache()
     parser = build_parser()
     args = parser.parse_args(argv)
     try:

@@ -55,7 +55,6 @@ from .residuals import improvement_z, noise_floor_hf
 
 Z_STAR = 3.5
 Z_STRUCT = 3.0  # structural vs re-fit: one comparison per case, t_19 at ~0.4 %
-USE_PREDICTION_CHECK = False
 RHO = 0.02
 SHRINK_EXPLAINED = 0.5
 DETERMINISTIC_NAMES = (
@@ -90,7 +89,6 @@ class Candidate:
     gap_after: float  # validation RMS (simulation, or one-step prediction for noise)
     residual: np.ndarray  # validation residual / prediction error
     prediction: np.ndarray | None  # validation output of the augmented model
-    pred_error: np.ndarray | None = None  # one-step errors with its own noise predictor
     params: dict = field(default_factory=dict)
     measure: str = "simulation"
 
@@ -161,24 +159,12 @@ def attribute(prep: Prepared, fit: dict) -> Attribution:
         res = y_val - pred
         if not np.all(np.isfinite(res)):
             res = np.full(n_val, np.inf)
-        r_est_c = (
-            np.asarray(prep.arrays.y_est)[: prep.n_est]
-            - fit["y_est"][best][: prep.n_est]
-        )
-        pe = noise_fit_numpy(r_est_c, res)["best"] if np.all(np.isfinite(res)) else res
         cands[effect] = Candidate(
-            effect,
-            best,
-            rms(res),
-            res,
-            pred,
-            pred_error=pe,
-            params=_params(prep, fit, best, effect),
+            effect, best, rms(res), res, pred, params=_params(prep, fit, best, effect)
         )
     # noise models on the nominal residual
     r_est = np.asarray(prep.arrays.y_est)[: prep.n_est] - prep.w_est
     noise = noise_fit_numpy(r_est, r_before)
-    pe_before = noise["best"]
     for effect in NOISE_NAMES:
         value, err = noise[effect]
         pname = "ar1_pole" if effect == "coloured_noise" else "level_gain"
@@ -192,25 +178,17 @@ def attribute(prep: Prepared, fit: dict) -> Attribution:
             measure="one_step_prediction",
         )
 
-    def sig(r_a, r_b, floor2, p_a=None, p_b=None, z_star=Z_STAR):
+    def sig(r_a, r_b, floor2, z_star=Z_STAR):
         z = improvement_z(r_a, r_b)
         gain = float(np.mean(r_a**2) - np.mean(r_b**2))
         ok = (z > z_star) and (gain > RHO * floor2)
-        if p_a is not None and USE_PREDICTION_CHECK:
-            # the improvement must survive a noise predictor on both sides, or a
-            # drift/coloured noise that a re-fit happens to soak up would pass
-            zp = improvement_z(p_a, p_b)
-            ok = ok and zp > Z_STAR
-            z = min(z, zp)
         return ok, z
 
     det = [cands[e] for e in DETERMINISTIC_NAMES if e in cands]
     best_det = min(det, key=lambda c: c.gap_after)
     floor_best = min(noise_floor_hf(best_det.residual), best_det.gap_after)
     tests = {}
-    gap_sig, z_gap = sig(
-        r_before, best_det.residual, floor_best**2, pe_before, best_det.pred_error
-    )
+    gap_sig, z_gap = sig(r_before, best_det.residual, floor_best**2)
     tests["deterministic_gap"] = {
         "z": z_gap,
         "significant": gap_sig,
@@ -221,15 +199,8 @@ def attribute(prep: Prepared, fit: dict) -> Attribution:
         pm = cands["parameter_mismatch"]
         structural = [c for c in det if c.effect != "parameter_mismatch"]
         best_s = min(structural, key=lambda c: c.gap_after)
-        s_sig, z_s = sig(
-            pm.residual,
-            best_s.residual,
-            floor_best**2,
-            pm.pred_error,
-            best_s.pred_error,
-            z_star=Z_STRUCT,
-        )
-        p_sig, z_p = sig(r_before, pm.residual, floor_best**2, pe_before, pm.pred_error)
+        s_sig, z_s = sig(pm.residual, best_s.residual, floor_best**2, z_star=Z_STRUCT)
+        p_sig, z_p = sig(r_before, pm.residual, floor_best**2)
         tests["structural_vs_refit"] = {
             "z": z_s,
             "significant": s_sig,

@@ -41,8 +41,11 @@ def fit_noise_models(
 
 
 def noise_fit_numpy(r_est: np.ndarray, r_val: np.ndarray) -> dict:
-    """Convenience wrapper on unpadded NumPy residuals."""
-    n = max(r_est.shape[0], r_val.shape[0])
+    """Convenience wrapper on unpadded NumPy residuals (padded to the diagnosis's
+    record buckets, so records of many lengths share a few compilations)."""
+    from .layout import bucket
+
+    n = bucket(max(r_est.shape[0], r_val.shape[0]))
     pe = np.zeros(n)
     pe[: r_est.shape[0]] = r_est
     me = np.zeros(n)

@@ -16,9 +16,14 @@ def avoid_eigen_pool_hang() -> None:
     parallel. Must run before the first computation (XLA reads the flags when the
     backend starts); set `XLA_FLAGS=--xla_cpu_multi_thread_eigen=true` to opt out.
     """
+    _add_xla_flag(_EIGEN_FLAG)
+
+
+def _add_xla_flag(flag: str) -> None:
+    """Append `--name=value` to `XLA_FLAGS` unless the user already set `--name`."""
     flags = os.environ.get("XLA_FLAGS", "")
-    if "xla_cpu_multi_thread_eigen" not in flags:
-        os.environ["XLA_FLAGS"] = f"{flags} {_EIGEN_FLAG}".strip()
+    if flag.split("=")[0] not in flags:
+        os.environ["XLA_FLAGS"] = f"{flags} {flag}".strip()
 
 
 _DEVICES_FLAG = "--xla_force_host_platform_device_count"
@@ -34,15 +39,14 @@ def split_cpu_into_devices() -> None:
     """
     import jax._src.xla_bridge as xb
 
-    flags = os.environ.get("XLA_FLAGS", "")
-    if _DEVICES_FLAG in flags or xb.backends_are_initialized():
+    if xb.backends_are_initialized():
         return
     try:
         cores = len(os.sched_getaffinity(0))
     except AttributeError:  # not on Linux
         cores = os.cpu_count() or 1
     if cores > 1:
-        os.environ["XLA_FLAGS"] = f"{flags} {_DEVICES_FLAG}={cores}".strip()
+        _add_xla_flag(f"{_DEVICES_FLAG}={cores}")
 
 
 def use_compilation_cache() -> None:

@@ -108,7 +108,6 @@ def study_main(name: str, argv: list[str] | None = None) -> int:
     """`main(argv)` of a thin `studies/<name>.py` script: same options as the CLI."""
     import matplotlib
 
-    from .._errors import UserInputError as _UserInputError
     from ..montecarlo.registry import get_study
 
     matplotlib.use("Agg")
@@ -119,6 +118,6 @@ def study_main(name: str, argv: list[str] | None = None) -> int:
     args.list, args.study = False, name
     try:
         return run_study(study, args)
-    except _UserInputError as err:
+    except UserInputError as err:
         print(f"{name}: error: {err}", file=sys.stderr)
         return 2

@@ -47,8 +47,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .augmented import NL_PIECEWISE, slot_names
-from .layout import N_MAX, Prepared
+from .augmented import EFFECT_SLOTS, NL_PIECEWISE, slot_names
+from .layout import DETERMINISTIC, N_MAX, Prepared
 from .noise_fit import noise_fit_numpy
 from .residuals import improvement_z, noise_floor_hf
 
@@ -57,27 +57,10 @@ Z_STAR = 3.5
 Z_STRUCT = 3.0  # structural vs re-fit: one comparison per case, t_19 at ~0.4 %
 RHO = 0.02
 SHRINK_EXPLAINED = 0.5
-DETERMINISTIC_NAMES = (
-    "parameter_mismatch",
-    "backlash",
-    "dead_zone",
-    "saturation",
-    "preload",
-    "rate_limit",
-    "time_delay",
-    "extra_pole",
-    "output_nonlinearity",
-)
+# the catalogue of `layout.DETERMINISTIC`, in its order, and each effect's slots
+DETERMINISTIC_NAMES = tuple(e.name for e in DETERMINISTIC)
 NOISE_NAMES = ("drift", "coloured_noise")
-EFFECT_SLOT_NAMES = {
-    "backlash": ("backlash",),
-    "dead_zone": ("dz_lo", "dz_hi"),
-    "saturation": ("sat_lo", "sat_hi"),
-    "preload": ("preload",),
-    "rate_limit": ("rate",),
-    "extra_pole": ("pole",),
-    "output_nonlinearity": ("out_q2", "out_q3", "out_lo", "out_hi", "out_db"),
-}
+EFFECT_SLOT_NAMES = {e.name: tuple(e.slots) for e in DETERMINISTIC if e.slots}
 
 
 @dataclass
@@ -132,7 +115,7 @@ def _params(prep: Prepared, fit: dict, row: int, effect: str) -> dict:
         out["tau_seconds"] = {"value": tau * prep.ctx.dt, "std": 0.0}
     refit = {}
     for i, name in enumerate(names):
-        if free[i] and name not in sum(EFFECT_SLOT_NAMES.values(), ()):
+        if free[i] and name not in EFFECT_SLOTS:
             refit[name] = {"value": float(phys[i]), "std": float(std_full[i])}
     out["nominal_refit"] = refit
     return out
@@ -184,6 +167,13 @@ def attribute(prep: Prepared, fit: dict) -> Attribution:
         ok = (z > z_star) and (gain > RHO * floor2)
         return ok, z
 
+    def noise_test():
+        """The better noise model against the white-noise predictor (recorded)."""
+        c = min((cands[e] for e in NOISE_NAMES), key=lambda c: c.gap_after)
+        ok, z = sig(r_before, c.residual, c.gap_after**2)
+        tests["noise_model"] = {"z": z, "significant": ok, "best": c.effect}
+        return c, ok
+
     det = [cands[e] for e in DETERMINISTIC_NAMES if e in cands]
     best_det = min(det, key=lambda c: c.gap_after)
     floor_best = min(noise_floor_hf(best_det.residual), best_det.gap_after)
@@ -214,9 +204,7 @@ def attribute(prep: Prepared, fit: dict) -> Attribution:
         else:
             effect, chosen = best_det.effect, best_det
     else:
-        noise_c = min((cands[e] for e in NOISE_NAMES), key=lambda c: c.gap_after)
-        n_sig, z_n = sig(r_before, noise_c.residual, noise_c.gap_after**2)
-        tests["noise_model"] = {"z": z_n, "significant": n_sig, "best": noise_c.effect}
+        noise_c, n_sig = noise_test()
         if n_sig:
             effect, chosen = noise_c.effect, noise_c
     gap_before = rms(r_before)
@@ -241,9 +229,7 @@ def attribute(prep: Prepared, fit: dict) -> Attribution:
     # data leaves a deterministic "explanation" that closes the gap only partly,
     # while the noise predictor reaches the floor: prefer the noise effect then.
     if chosen is not None and chosen.measure == "simulation" and shrink < 0.8:
-        noise_c = min((cands[e] for e in NOISE_NAMES), key=lambda c: c.gap_after)
-        n_sig, z_n = sig(r_before, noise_c.residual, noise_c.gap_after**2)
-        tests["noise_model"] = {"z": z_n, "significant": n_sig, "best": noise_c.effect}
+        noise_c, n_sig = noise_test()
         if n_sig and noise_c.gap_after < gap_after:
             effect, chosen = noise_c.effect, noise_c
             gap_after = floor = chosen.gap_after

@@ -10,6 +10,7 @@ import jax.tree_util as jtu
 import numpy as np
 
 from ..models import Hammerstein
+from ..montecarlo.sharding import effective_chunk
 from .attribute import Attribution, attribute
 from .fit import fit_cases
 from .layout import bucket, n_free_parameters, prepare
@@ -105,6 +106,7 @@ REFIT = "parameter_mismatch"
 MAIN_STEPS = 8
 CONTINUE_STEPS = 40
 CONTINUE_CLASSES = 4
+RESTART = 1  # column of the finishing batch that restarts the re-fit
 
 
 def _continue_stopped(padded: list, rows, cases, fits, *, reuse_shape: bool = False):
@@ -132,11 +134,10 @@ def _continue_stopped(padded: list, rows, cases, fits, *, reuse_shape: bool = Fa
     result = np.asarray(fits.result)
     sse = np.where(np.isfinite(fits.sse_est), fits.sse_est, np.inf)
     theta = np.asarray(fits.theta)
-    n_dev = jax.device_count()
-    width = -(-(2 + CONTINUE_CLASSES) // n_dev) * n_dev  # a multiple of the devices
+    width = effective_chunk(2 + CONTINUE_CLASSES, jax.device_count())
     if reuse_shape:
         width = max(width, rows.theta0.shape[1])
-    pick, start, restart = [], [], []
+    pick, start = [], []
     for c, p in enumerate(padded):
         names = [name for name, _ in p.rows]
         best = {}
@@ -149,26 +150,25 @@ def _continue_stopped(padded: list, rows, cases, fits, *, reuse_shape: bool = Fa
         columns = [i_pm, i_pm] + lead + [i_pm] * (width - 2 - len(lead))
         pick.append(columns)
         starts = [theta[c, k] for k in columns]
-        starts[1] = np.where(used, theta[c, lead[0]], 0.0)  # nominal part only
+        starts[RESTART] = np.where(used, theta[c, lead[0]], 0.0)  # nominal part only
         start.append(starts)
-        restart.append([False, True] + [False] * (width - 2))
-    pick, start, restart = np.asarray(pick), np.asarray(start), np.asarray(restart)
+    pick, start = np.asarray(pick), np.asarray(start)
     cidx = np.arange(len(padded))[:, None]
     sel = jtu.tree_map(lambda x: np.asarray(x)[cidx, pick], rows)
     sel = eqx.tree_at(lambda r: r.theta0, sel, start)
-    more = jax.device_get(fit_cases(sel, cases, CONTINUE_STEPS))
+    more = jtu.tree_map(np.asarray, fit_cases(sel, cases, CONTINUE_STEPS))
     more_sse = np.where(np.isfinite(more.sse_est), more.sse_est, np.inf)
     out = jtu.tree_map(np.array, fits)
     for c in range(len(padded)):
         for j in range(width):
             k = pick[c, j]
-            if restart[c, j]:
+            if j == RESTART:
                 take = more_sse[c, j] < out.sse_est[c, k]
             else:
                 take = result[c, k] != 0 and more_sse[c, j] <= out.sse_est[c, k]
             if take:
                 for name in fits.__dataclass_fields__:
-                    getattr(out, name)[c, k] = np.asarray(getattr(more, name))[c, j]
+                    getattr(out, name)[c, k] = getattr(more, name)[c, j]
     return out
 
 
@@ -187,7 +187,7 @@ def diagnose_many(
     `on_result(i, diagnosis)` is called as soon as case `i` is done, so a caller
     can write each result before the next chunk starts.
     """
-    chunk = -(-chunk // jax.device_count()) * jax.device_count()
+    chunk = effective_chunk(chunk, jax.device_count())
     groups = defaultdict(list)
     for i, (_plant, _dt, est, val) in enumerate(items):
         n = max(est["v"].shape[0], val["v"].shape[0])

@@ -8,6 +8,7 @@ from jaxtyping import Array, Float
 
 from .effects.coloured_noise import ar1_errors, fit_ar1
 from .effects.drift import fit_local_level, local_level_errors
+from .layout import bucket
 
 
 class NoiseFit(eqx.Module):
@@ -17,8 +18,6 @@ class NoiseFit(eqx.Module):
     ar1_errors: Float[Array, " L"]
     level_alpha: Float[Array, ""]
     level_errors: Float[Array, " L"]
-    ar1_sse_est: Float[Array, ""]
-    level_sse_est: Float[Array, ""]
 
 
 @eqx.filter_jit
@@ -35,16 +34,12 @@ def fit_noise_models(
         ar1_errors(r_val, a),
         alpha,
         local_level_errors(r_val, alpha),
-        jnp.sum(m_est * ar1_errors(r_est, a) ** 2),
-        jnp.sum(m_est * local_level_errors(r_est, alpha) ** 2),
     )
 
 
 def noise_fit_numpy(r_est: np.ndarray, r_val: np.ndarray) -> dict:
     """Convenience wrapper on unpadded NumPy residuals (padded to the diagnosis's
     record buckets, so records of many lengths share a few compilations)."""
-    from .layout import bucket
-
     n = bucket(max(r_est.shape[0], r_val.shape[0]))
     pe = np.zeros(n)
     pe[: r_est.shape[0]] = r_est
@@ -57,7 +52,4 @@ def noise_fit_numpy(r_est: np.ndarray, r_val: np.ndarray) -> dict:
     return {
         "coloured_noise": (float(f.ar1_pole), np.asarray(f.ar1_errors)[:k]),
         "drift": (float(f.level_alpha), np.asarray(f.level_errors)[:k]),
-        "best": np.asarray(
-            f.ar1_errors if f.ar1_sse_est < f.level_sse_est else f.level_errors
-        )[:k],
     }

@@ -25,10 +25,16 @@ def seed000_plant():
 
 
 def seed001_plant():
-    """Seed 001 Section V.C: $A = 1 - 1.5q^{-1} + 0.56q^{-2}$, $B = q^{-1} - 2q^{-2}$,
-    $K_1 = 1, K_2 = 2, D_1 = 1, D_2 = -2, L_1 = 1, L_2 = -2$, $V = (-6, -3, 3, 6)$."""
-    F = hm.PiecewiseLinear(k1=1.0, k2=2.0, d1=1.0, d2=-2.0, l1=1.0, l2=-2.0)
+    """Seed 001 Section V.C (`recursive_pl_plants.paper_case`) as `(plant, levels,
+    order)`: $A = 1 - 1.5q^{-1} + 0.56q^{-2}$, $B = q^{-1} - 2q^{-2}$,
+    $K_1 = 1, K_2 = 2, D_1 = 1, D_2 = -2, L_1 = 1, L_2 = -2$, $V = (-6, -3, 3, 6)$,
+    with `dt = 1`."""
+    from .recursive_pl_plants import paper_case
+
+    c = paper_case()
     G = hm.DiscreteTransferFunction(
-        jnp.array([0.0, 1.0, -2.0]), jnp.array([1.0, -1.5, 0.56]), dt=1.0
+        jnp.concatenate([jnp.zeros(1), c.b]),
+        jnp.concatenate([jnp.ones(1), c.a]),
+        dt=1.0,
     )
-    return hm.Hammerstein(F, G), jnp.array([-6.0, -3.0, 3.0, 6.0]), 2
+    return hm.Hammerstein(c.nonlinearity, G), c.levels, c.order

@@ -6,7 +6,7 @@ from pathlib import Path
 import numpy as np
 
 from .._errors import UserInputError
-from .csv import read_csv
+from .csv import read_csv, sampling_period
 from .files import read_json
 
 
@@ -40,7 +40,7 @@ def read_data(folder: Path, design: dict, v_designed: np.ndarray) -> np.ndarray:
         raise UserInputError(
             f"{path}: {t.shape[0]} rows but experiment.json designs {n} samples"
         )
-    step = (t[-1] - t[0]) / (n - 1)
+    step = sampling_period(t)
     if abs(t[0]) > 1e-9 * dt or abs(step - dt) > 1e-6 * dt:
         raise UserInputError(
             f"{path}: t must start at 0 with step dt = {dt:g} (experiment.json); "

@@ -7,6 +7,8 @@ the gap is the RMS of the one-step-ahead prediction error $r_k - \\ell_k$.
 $\\alpha = 0$ (and $\\ell_0 = 0$) is neutral: the white-noise predictor $\\hat r = 0$.
 """
 
+import functools
+
 import jax
 import jax.lax as lax
 import jax.numpy as jnp
@@ -15,7 +17,13 @@ from jaxtyping import Array, Float
 from ._base import AbstractEffect
 
 
-ALPHAS = jnp.concatenate([jnp.array([0.0]), jnp.geomspace(1e-3, 1.0, 48)])
+@functools.cache
+def _alphas() -> Array:
+    # built on first use, not at import: an array at import time would start JAX's
+    # backend (fixing its flags, e.g. the device count) before the caller chose them;
+    # evaluated eagerly even when first called under `jit`, so no tracer is cached
+    with jax.ensure_compile_time_eval():
+        return jnp.concatenate([jnp.array([0.0]), jnp.geomspace(1e-3, 1.0, 48)])
 
 
 def local_level_errors(
@@ -34,8 +42,9 @@ def fit_local_level(
     r: Float[Array, " time"], mask: Float[Array, " time"]
 ) -> Float[Array, ""]:
     """$\\alpha$ minimising the masked prediction-error energy (grid over $[0, 1]$)."""
-    sse = jax.vmap(lambda a: jnp.sum(mask * local_level_errors(r, a) ** 2))(ALPHAS)
-    return ALPHAS[jnp.argmin(sse)]
+    alphas = _alphas()
+    sse = jax.vmap(lambda a: jnp.sum(mask * local_level_errors(r, a) ** 2))(alphas)
+    return alphas[jnp.argmin(sse)]
 
 
 class DriftEffect(AbstractEffect):

@@ -11,6 +11,7 @@ from ...io import write_json
 from ...plotting.refinement import plot_closed_form_vs_refined
 from ...refinement import refine_recursive_pl_result
 from ..defaults import seed001_plant
+from ..recursive_pl_plants import paper_case
 
 
 def _flat(d: dict) -> np.ndarray:
@@ -27,12 +28,8 @@ def run(key, out: Path) -> list[tuple[str, str]]:
     )
     closed_dict = result_dict(closed, rho=1e6, estimator="batch")
     refined = refine_recursive_pl_result(v, y, closed_dict, levels=levels, order=order)
-    # Truth in the (3.10) normalisation: b = (1, -2)/sqrt(5), sign so the first
-    # largest-magnitude entry is positive, F(V_j) scaled to match.
-    b = np.array([1.0, -2.0])
-    scale = np.linalg.norm(b) * np.sign(b[np.argmax(np.abs(b))])
-    F = np.asarray(plant.nonlinearity(levels)) * scale
-    truth = np.concatenate([[-1.5, 0.56], b / scale, F])
+    t = paper_case().normalised_truth()  # the truth in the (3.10) normalisation
+    truth = np.concatenate([t["a"], t["b"], t["points"]])
     se_points = np.asarray(refined["standard_errors"]["points"], dtype=float)
     se = np.concatenate(
         [

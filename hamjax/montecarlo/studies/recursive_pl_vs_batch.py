@@ -9,7 +9,6 @@ and counted in floating-point operations.
 """
 
 import json
-import time
 from pathlib import Path
 
 import equinox as eqx
@@ -29,6 +28,7 @@ from ..config import MonteCarloConfig
 from ..runner import run_monte_carlo
 from ..statistics import summarise
 from ..storage import atomic_write_bytes
+from ..timing import time_per_call
 
 
 NAME = "recursive-pl-vs-batch"
@@ -68,14 +68,6 @@ class CompareTrial(eqx.Module):
 
     def __call__(self, key):
         return {"gradient": self.gradient(key), "batch": self.batch(key)}
-
-
-def _time_per_realisation(fn, keys) -> float:
-    f = jax.jit(jax.vmap(fn))
-    jax.block_until_ready(f(keys))  # compile
-    start = time.perf_counter()
-    jax.block_until_ready(f(keys))
-    return (time.perf_counter() - start) / keys.shape[0]
 
 
 def add_arguments(parser) -> None:
@@ -121,8 +113,8 @@ def run(key, *, realisations: int, chunk: int, out: Path, quiet: bool, args) -> 
     stats = {name: summarise(res[name], np.asarray(theta_star)) for name in res}
     keys = jax.vmap(lambda r: jr.fold_in(key, r))(jnp.arange(min(chunk, realisations)))
     seconds = {
-        "gradient": _time_per_realisation(trial.gradient, keys),
-        "batch": _time_per_realisation(trial.batch, keys),
+        "gradient": time_per_call(trial.gradient, keys),
+        "batch": time_per_call(trial.batch, keys),
     }
     n_time, p = int(v.shape[0]), 10
     flops = {"gradient": n_time * (6 * p + 10), "batch": n_time * p * (p + 1) + p**3}

@@ -11,7 +11,6 @@ started from the NBBI points and an all-pole $G$ chosen on a grid
 (`initial_backlash_theta`). NBBI gives no $G$: its entries are NaN.
 """
 
-import time
 from pathlib import Path
 
 import equinox as eqx
@@ -35,6 +34,12 @@ from ...signals import initialisation_step, nbbi_staircase
 from ...simulation import simulate
 from ..config import MonteCarloConfig
 from ..runner import run_monte_carlo
+from ..timing import time_per_call
+from ._refinement import (
+    add_refinement_arguments,
+    refinement_options,
+    timing_requested,
+)
 
 
 NAME = "refinement-nbbi"
@@ -50,15 +55,7 @@ def add_arguments(parser) -> None:
     parser.add_argument("--holds", default="5,10,20,40", help="hold N*Tr (s) per level")
     parser.add_argument("--snrs", default="20,40", help="SNRs in dB (comma-separated)")
     parser.add_argument("--dt", type=float, default=0.05, help="sampling period (s)")
-    parser.add_argument(
-        "--solver", default="levenberg-marquardt", help="refinement solver"
-    )
-    parser.add_argument(
-        "--no-timing",
-        dest="timing",
-        action="store_false",
-        help="skip the cost measurement (two extra compilations)",
-    )
+    add_refinement_arguments(parser)
 
 
 def make_record(plant, levels, hold, dt):
@@ -126,14 +123,6 @@ def _closed_form(y, levels, hold, dt, start):
     return res.cycle_values, ok
 
 
-def _time_per_estimate(fn, keys) -> float:
-    batched = jax.jit(jax.vmap(fn))
-    jax.block_until_ready(batched(keys))
-    start = time.perf_counter()
-    jax.block_until_ready(batched(keys))
-    return (time.perf_counter() - start) / keys.shape[0]
-
-
 def run(key, *, realisations: int, chunk: int, out: Path, quiet: bool, args) -> dict:
 
     from ...plotting.refinement import save_refinement_study
@@ -141,9 +130,7 @@ def run(key, *, realisations: int, chunk: int, out: Path, quiet: bool, args) -> 
     holds = [float(x) for x in str(getattr(args, "holds", "5,10,20,40")).split(",")]
     snrs = [float(x) for x in str(getattr(args, "snrs", "20,40")).split(",")]
     dt = float(getattr(args, "dt", 0.05))
-    options = RefinementOptions(
-        solver=str(getattr(args, "solver", "levenberg-marquardt"))
-    )
+    options = refinement_options(args)
     plant, levels, _, _ = seed000_plant()
     records, sigmas, crlb, truths, starts = [], [], [], [], []
     for hold in holds:
@@ -173,9 +160,6 @@ def run(key, *, realisations: int, chunk: int, out: Path, quiet: bool, args) -> 
     lv = tuple(float(x) for x in levels)
     keys = jax.vmap(lambda r: jr.fold_in(jr.key(1), r))(jnp.arange(min(chunk, 32)))
     noisy = lambda k: w + sigmas[-1][0] * jr.normal(k, w.shape)
-    t_cf = _time_per_estimate(
-        lambda k: _closed_form(noisy(k), lv, holds[-1], dt, starts[-1])[0], keys
-    )
 
     def _full(k):
         y = noisy(k)
@@ -184,9 +168,12 @@ def run(key, *, realisations: int, chunk: int, out: Path, quiet: bool, args) -> 
             p, initial_backlash_theta(p, cf, v, y), v, y, options=options, throw=False
         ).estimate
 
-    timing = bool(getattr(args, "timing", True))
-    t_ref = _time_per_estimate(_full, keys) if timing else float("nan")
-    t_cf = t_cf if timing else float("nan")
+    t_cf = t_ref = float("nan")
+    if timing_requested(args):
+        t_cf = time_per_call(
+            lambda k: _closed_form(noisy(k), lv, holds[-1], dt, starts[-1])[0], keys
+        )
+        t_ref = time_per_call(_full, keys)
     names = list(records[0][2].names)
     configs = []
     k = 0

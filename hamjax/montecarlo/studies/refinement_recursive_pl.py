@@ -15,7 +15,6 @@ intermediate step is needed. Parameters $(a, b, F(V_j))$ in the normalisation
 (3.10).
 """
 
-import time
 from pathlib import Path
 
 import equinox as eqx
@@ -44,6 +43,12 @@ from ...signals import pe_impulse_sequence
 from ...simulation import simulate
 from ..config import MonteCarloConfig
 from ..runner import run_monte_carlo
+from ..timing import time_per_call
+from ._refinement import (
+    add_refinement_arguments,
+    refinement_options,
+    timing_requested,
+)
 
 
 NAME = "refinement-recursive-pl"
@@ -60,15 +65,7 @@ def add_arguments(parser) -> None:
         "--periods", default="10,30,100,300", help="record lengths in periods of 7n"
     )
     parser.add_argument("--snrs", default="10,20", help="SNRs in dB (comma-separated)")
-    parser.add_argument(
-        "--solver", default="levenberg-marquardt", help="refinement solver"
-    )
-    parser.add_argument(
-        "--no-timing",
-        dest="timing",
-        action="store_false",
-        help="skip the cost measurement (two extra compilations)",
-    )
+    add_refinement_arguments(parser)
 
 
 def _closed_form(v, y, levels, n):
@@ -131,14 +128,6 @@ class _Trial(eqx.Module):
         return {k: jnp.stack(x) for k, x in out.items()}
 
 
-def _time_per_estimate(fn, keys) -> float:
-    batched = jax.jit(jax.vmap(fn))
-    jax.block_until_ready(batched(keys))
-    start = time.perf_counter()
-    jax.block_until_ready(batched(keys))
-    return (time.perf_counter() - start) / keys.shape[0]
-
-
 def run(key, *, realisations: int, chunk: int, out: Path, quiet: bool, args) -> dict:
 
     from ...plotting.refinement import save_refinement_study
@@ -147,9 +136,7 @@ def run(key, *, realisations: int, chunk: int, out: Path, quiet: bool, args) -> 
         int(x) for x in str(getattr(args, "periods", "10,30,100,300")).split(",")
     ]
     snrs = [float(x) for x in str(getattr(args, "snrs", "10,20")).split(",")]
-    options = RefinementOptions(
-        solver=str(getattr(args, "solver", "levenberg-marquardt"))
-    )
+    options = refinement_options(args)
     plant, levels, n = seed001_plant()
     truth_p = ImpulseTableParametrisation(levels, jnp.array([1.0, -2.0]))
     theta_true = truth_p.from_physical(
@@ -186,7 +173,6 @@ def run(key, *, realisations: int, chunk: int, out: Path, quiet: bool, args) -> 
     v, w, sigmas = records[-1]
     keys = jax.vmap(lambda r: jr.fold_in(jr.key(1), r))(jnp.arange(min(chunk, 64)))
     noisy = lambda k: w + sigmas[0] * jr.normal(k, w.shape)
-    t_cf = _time_per_estimate(lambda k: _closed_form(v, noisy(k), levels, n)[0], keys)
     lv = jnp.asarray(levels)
 
     def _full(k):
@@ -196,9 +182,10 @@ def run(key, *, realisations: int, chunk: int, out: Path, quiet: bool, args) -> 
             v, y, levels, steiglitz_mcbride_table(v, y, lv, cf[:n]), options
         ).estimate
 
-    timing = bool(getattr(args, "timing", True))
-    t_ref = _time_per_estimate(_full, keys) if timing else float("nan")
-    t_cf = t_cf if timing else float("nan")
+    t_cf = t_ref = float("nan")
+    if timing_requested(args):
+        t_cf = time_per_call(lambda k: _closed_form(v, noisy(k), levels, n)[0], keys)
+        t_ref = time_per_call(_full, keys)
     names = list(truth_p.names)
     configs = []
     k = 0

@@ -1,8 +1,9 @@
-"""The batched candidate fit: split over devices, and the finishing stage
-(`_continue_stopped`) that restarts the re-fit from a structural row's nominal part."""
+"""The batched candidate fit and its work queue: the device split, resuming a fit,
+the finishing stage's restart of the re-fit, and the reported standard errors."""
 
 import textwrap
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import jax.random as jr
@@ -11,9 +12,18 @@ import numpy as np
 import pytest
 from helpers import run_on_two_devices
 
-from hamjax.diagnosis.diagnose import REFIT, _continue_stopped
-from hamjax.diagnosis.fit import fit_cases
-from hamjax.diagnosis.layout import prepare
+import hamjax.diagnosis.schedule as schedule
+from hamjax.diagnosis.augmented import slot_index
+from hamjax.diagnosis.fit import LAMBDA0, fit_batch, theta_std
+from hamjax.diagnosis.layout import N_MAX, prepare
+from hamjax.diagnosis.schedule import (
+    FIELDS,
+    REFIT,
+    finishing_items,
+    merge,
+    run_batch,
+    run_queue,
+)
 from hamjax.internal.gap_cases import tiny_case
 
 
@@ -22,19 +32,23 @@ SETUP = textwrap.dedent(
     import jax.numpy as jnp
     import jax.random as jr
     import jax.tree_util as jtu
+    import numpy as np
     from hamjax.diagnosis.layout import prepare
     from hamjax.internal.gap_cases import tiny_case
 
     def stack(xs):
         return jtu.tree_map(lambda *x: jnp.stack(x), *xs)
 
-    def grid(keys_effects):
+    def flat(keys_effects):
+        # every row of every case, each row next to its own case
         preps = [
             prepare(*tiny_case(jr.key(k), e, noise=1e-3), length=512, n_params=13)
             for k, e in keys_effects
         ]
-        rows = stack([stack([r for _, r in p.rows]) for p in preps])
-        return rows, stack([p.arrays for p in preps])
+        rows = stack([r for p in preps for _, r in p.rows])
+        cases = stack([p.arrays for p in preps for _ in p.rows])
+        n = rows.theta0.shape[0]
+        return rows, cases, np.full(n, 6), np.full(n, 1e-3)
     """
 )
 
@@ -42,26 +56,21 @@ CHILD = SETUP + textwrap.dedent(
     """
     import sys
     import jax
-    import numpy as np
     import hamjax as hj
-    from hamjax.diagnosis.fit import fit_cases
+    from hamjax.diagnosis.fit import fit_batch
 
     hj.enable_x64()
-    two = fit_cases(*grid([(3, "extra_pole"), (4, "saturation")]), 6)  # split cases
-    one = fit_cases(*grid([(5, "backlash")]), 6)  # one case: split its rows
-    np.savez(
-        sys.argv[1], devices=jax.device_count(), two_sse=two.sse_est,
-        one_sse=one.sse_est,
-    )
+    two = fit_batch(*flat([(3, "extra_pole"), (4, "saturation")]))
+    np.savez(sys.argv[1], devices=jax.device_count(), sse=two.sse_est)
     """
 )
 
 
 @pytest.mark.slow
 def test_two_devices_give_the_single_device_fit(tmp_path):
-    # Each row is an independent fit: splitting cases (or one case's rows) over two
-    # devices changes only the vector width XLA computes with, i.e. rounding. The
-    # damped Gauss-Newton steps amplify rounding along ill-conditioned directions
+    # Each row is an independent fit: splitting the rows over two devices changes
+    # only the vector width XLA computes with, i.e. rounding. The damped
+    # Gauss-Newton steps amplify rounding along ill-conditioned directions
     # (measured: 3e-7 relative in the SSE after 6 steps), hence 1e-5; a row fitted
     # on the wrong case or with another row's start differs by O(1).
     sharded = run_on_two_devices(CHILD, tmp_path)
@@ -69,14 +78,47 @@ def test_two_devices_give_the_single_device_fit(tmp_path):
     ns: dict = {}
     exec(SETUP, ns)
     assert jax.device_count() == 1
-    two = fit_cases(*ns["grid"]([(3, "extra_pole"), (4, "saturation")]), 6)
-    one = fit_cases(*ns["grid"]([(5, "backlash")]), 6)
-    for name, ref in (("two", two), ("one", one)):
-        np.testing.assert_allclose(sharded[f"{name}_sse"], ref.sse_est, rtol=1e-5)
+    one = fit_batch(*ns["flat"]([(3, "extra_pole"), (4, "saturation")]))
+    np.testing.assert_allclose(sharded["sse"], one.sse_est, rtol=1e-5)
 
 
 def _stack(xs):
     return jtu.tree_map(lambda *x: jnp.stack(x), *xs)
+
+
+def _all_rows(prep, steps):
+    n = len(prep.rows)
+    rows = _stack([r for _, r in prep.rows])
+    cases = _stack([prep.arrays] * n)
+    fit = fit_batch(rows, cases, np.full(n, steps), np.full(n, LAMBDA0))
+    return {name: np.array(getattr(fit, name)) for name in FIELDS}
+
+
+@pytest.mark.slow
+def test_resumed_fit_is_the_uninterrupted_fit():
+    # A fit stopped after 5 steps and resumed with its damping (lam0 = 3 lam, see
+    # `levenberg_marquardt`) retraces the uninterrupted fit: the resumed one only
+    # re-evaluates its starting point once, so 5 + 31 steps reach the point of 35.
+    # Rounding is the only difference (same arithmetic, other batch width).
+    prep = prepare(*tiny_case(jr.key(3), "extra_pole", noise=1e-3))
+    n = len(prep.rows)
+    rows = _stack([r for _, r in prep.rows])
+    cases = _stack([prep.arrays] * n)
+    first = fit_batch(rows, cases, np.full(n, 5), np.full(n, LAMBDA0))
+    moving = np.asarray(first.result) == 1
+    assert moving.any()
+    resumed = fit_batch(
+        eqx.tree_at(lambda r: r.theta0, rows, first.theta),
+        cases,
+        np.full(n, 31),
+        3.0 * np.asarray(first.lam),
+    )
+    straight = fit_batch(rows, cases, np.full(n, 35), np.full(n, LAMBDA0))
+    np.testing.assert_allclose(
+        np.asarray(resumed.sse_est)[moving],
+        np.asarray(straight.sse_est)[moving],
+        rtol=1e-6,
+    )
 
 
 @pytest.mark.slow
@@ -87,19 +129,77 @@ def test_refit_restarted_from_structural_row_leaves_a_local_minimum():
     # parameters and land on the optimum of an uninterrupted fit.
     plant, dt, est, val = tiny_case(jr.key(8), "none", noise=1e-3)
     prep = prepare(plant, dt, est, val)
-    rows = _stack([_stack([r for _, r in prep.rows])])
-    cases = _stack([prep.arrays])
-    full = jax.device_get(fit_cases(rows, cases, 200))
+    full = _all_rows(prep, 200)
     i_pm = [name for name, _ in prep.rows].index(REFIT)
-    bad = jtu.tree_map(np.array, full)
-    bad.theta[0, i_pm] = bad.theta[0, i_pm] + 5.0
-    bad.sse_est[0, i_pm] = 1e3 * full.sse_est[0, i_pm]
-    bad.result[0, i_pm] = 0
-    done = _continue_stopped([prep], rows, cases, bad)
-    np.testing.assert_allclose(done.sse_est[0, i_pm], full.sse_est[0, i_pm], rtol=1e-6)
+    bad = {k: v.copy() for k, v in full.items()}
+    bad["theta"][i_pm] = bad["theta"][i_pm] + 5.0
+    bad["sse_est"][i_pm] = 1e3 * full["sse_est"][i_pm]
+    bad["result"][i_pm] = 0
+    items = finishing_items(0, prep, bad)
+    assert [it.replace for it in items if it.row == i_pm] == ["lower"]  # converged
+    rows = [_stack([r for _, r in prep.rows])]
+    arrays = _stack([prep.arrays])
+    out = run_batch(items, [200] * len(items), rows, arrays, len(items))
+    before = {k: v.copy() for k, v in bad.items()}
+    for j, it in enumerate(items):
+        merge(bad, it, {name: x[j] for name, x in out.items()})
+    np.testing.assert_allclose(bad["sse_est"][i_pm], full["sse_est"][i_pm], rtol=1e-6)
     # rows that had converged and are not the re-fit are left untouched
-    others = [k for k in range(len(prep.rows)) if k != i_pm and full.result[0, k] == 0]
-    np.testing.assert_array_equal(done.sse_est[0, others], full.sse_est[0, others])
+    others = [k for k in range(len(prep.rows)) if k != i_pm and full["result"][k] == 0]
+    np.testing.assert_array_equal(bad["sse_est"][others], before["sse_est"][others])
+
+
+@pytest.mark.slow
+def test_queue_finishes_rows_stopped_in_screening(monkeypatch):
+    # With a 2-step screening every row stops; the finishing stage (12-step first
+    # pass, then the rest of a 200-step budget in the continuation queue) must bring
+    # the re-fit row to the optimum of an uninterrupted 200-step fit.
+    monkeypatch.setattr(schedule, "SCREEN_STEPS", 2)
+    monkeypatch.setattr(schedule, "FINISH_STEPS", 200)
+    preps = [prepare(*tiny_case(jr.key(k), "extra_pole", noise=1e-3)) for k in (3, 5)]
+    got = {}
+    run_queue(preps, 2 * len(preps[0].rows), lambda c, f: got.setdefault(c, f))
+    assert sorted(got) == [0, 1]
+    for c, prep in enumerate(preps):
+        full = _all_rows(prep, 200)
+        i_pm = [name for name, _ in prep.rows].index(REFIT)
+        assert got[c]["result"][i_pm] == 0
+        np.testing.assert_allclose(
+            got[c]["sse_est"][i_pm], full["sse_est"][i_pm], rtol=1e-6
+        )
+        assert got[c]["theta_std"].shape == got[c]["theta"].shape
+
+
+@pytest.mark.slow
+def test_reported_std_matches_the_monte_carlo_spread():
+    # One plant and input, R = 64 noise realisations, the extra-pole row fitted to
+    # convergence on each. The Gauss-Newton std of the pole parameter must match
+    # the spread of its estimates: the sample std of R draws has relative standard
+    # error 1/sqrt(2(R-1)) = 0.09; 4 of those bound the ratio (a wrong dof, scale or
+    # Jacobian would be off by a large factor).
+    plant, dt, est, val = tiny_case(jr.key(4), "extra_pole", noise=0.0)
+    R, sigma = 64, 0.01
+    preps = []
+    for i in range(R):
+        e = dict(est)
+        e["y"] = est["y"] + sigma * np.asarray(
+            jr.normal(jr.key(100 + i), est["y"].shape)
+        )
+        preps.append(prepare(plant, dt, e, val))
+    names = [name for name, _ in preps[0].rows]
+    k = names.index("extra_pole")
+    n_slots = preps[0].arrays.anchor.shape[0]
+    idx = np.asarray(preps[0].rows[k][1].idx)
+    j = int(np.flatnonzero(idx == slot_index("pole", N_MAX))[0])
+    rows = _stack([p.rows[k][1] for p in preps])
+    cases = _stack([p.arrays for p in preps])
+    fit = fit_batch(rows, cases, np.full(R, 200), np.full(R, LAMBDA0))
+    assert np.all(np.asarray(fit.result) == 0)
+    used = idx < n_slots
+    std = np.array([theta_std(fit.jtj[i], fit.s2[i], used)[j] for i in range(R)])
+    spread = np.std(np.asarray(fit.theta)[:, j], ddof=1)
+    ratio = np.mean(std) / spread
+    assert abs(ratio - 1) < 4 / np.sqrt(2 * (R - 1)), ratio
 
 
 def test_numpy_nominal_response_matches_scipy():

@@ -1,16 +1,11 @@
 """Noise-free recovery of every catalogue effect, and the false-alarm rate of the
 significance rule on `none` cases (one batched, compiled-once call each)."""
 
-import jax
-import jax.numpy as jnp
 import jax.random as jr
-import jax.tree_util as jtu
 import numpy as np
 import pytest
 
-from hamjax.diagnosis.diagnose import REFIT, _continue_stopped, diagnose_many
-from hamjax.diagnosis.fit import fit_cases
-from hamjax.diagnosis.layout import prepare
+from hamjax.diagnosis.diagnose import diagnose_many
 from hamjax.internal.gap_cases import EXACT_PARAMS, coloured_case, tiny_case
 
 
@@ -80,23 +75,3 @@ def test_false_alarm_on_none_cases():
     out = diagnose_many(items)
     alarms = sum(d.effect != "none" for d in out)
     assert alarms <= 3, [d.effect for d in out]
-
-
-@pytest.mark.slow
-def test_continuation_finishes_stopped_refit():
-    # Rows stopped after 2 Levenberg-Marquardt steps are continued to convergence:
-    # the re-fit row then matches an uninterrupted 200-step fit (same cost up to the
-    # stopping tolerance) and no longer reports "stopped".
-    plant, dt, est, val = tiny_case(jr.key(3), "extra_pole", noise=1e-3)
-    prep = prepare(plant, dt, est, val)
-    stack = lambda xs: jtu.tree_map(lambda *x: jnp.stack(x), *xs)  # noqa: E731
-    rows = stack([stack([r for _, r in prep.rows])])
-    cases = stack([prep.arrays])
-    short = jax.device_get(fit_cases(rows, cases, 2))
-    full = jax.device_get(fit_cases(rows, cases, 200))
-    i_pm = [name for name, _ in prep.rows].index(REFIT)
-    assert short.result[0, i_pm] == 1
-    done = _continue_stopped([prep], rows, cases, short)
-    assert done.result[0, i_pm] == 0
-    assert done.sse_est[0, i_pm] < short.sse_est[0, i_pm]
-    np.testing.assert_allclose(done.sse_est[0, i_pm], full.sse_est[0, i_pm], rtol=1e-6)

@@ -24,7 +24,12 @@ Decisions, in order:
 - *deterministic gap*: the best candidate (lowest validation MSE) against the
   nominal simulation; if significant, a *structural* effect is named when the best
   structural candidate is significant against the re-fitted nominal model
-  (`parameter_mismatch`), otherwise `parameter_mismatch` when that is significant;
+  (`parameter_mismatch`), or when the nested likelihood-ratio test on the
+  estimation record names one (`_nested_lr`: every structural candidate nests the
+  re-fit, so with white noise $\\Delta S / \\hat\\sigma^2 \\sim \\chi^2_k$; far more
+  power than the held-out test for effects of the order of the noise, which
+  the re-fit partly absorbs) and validation confirms it ($z > 2$); otherwise
+  `parameter_mismatch` when that is significant;
   the named effect becomes `unexplained` when it closes less than half of the gap
   above the noise floor (shrink $< 0.5$);
 - otherwise a *noise-model* effect (`drift`, `coloured_noise`) when its one-step-ahead
@@ -55,6 +60,8 @@ from .residuals import improvement_z, noise_floor_hf
 
 Z_STAR = 3.5
 Z_STRUCT = 3.0  # structural vs re-fit: one comparison per case, t_19 at ~0.4 %
+LR_ALPHA = 1e-3  # level of the nested likelihood-ratio test (before Bonferroni)
+Z_CONFIRM = 2.0  # validation z that confirms a candidate the likelihood ratio picked
 RHO = 0.02
 SHRINK_EXPLAINED = 0.5
 # the catalogue of `layout.DETERMINISTIC`, in its order, and each effect's slots
@@ -119,6 +126,34 @@ def _params(prep: Prepared, fit: dict, row: int, effect: str) -> dict:
             refit[name] = {"value": float(phys[i]), "std": float(std_full[i])}
     out["nominal_refit"] = refit
     return out
+
+
+def _nested_lr(prep: Prepared, fit: dict, pm: Candidate, structural: list) -> dict:
+    """The likelihood-ratio test of the best structural candidate on estimation data
+    (lowest estimation SSE) against the re-fit it nests, confirmed on validation.
+
+    $\\Lambda = (S_{re-fit} - S_{effect}) / \\hat\\sigma^2$ with
+    $\\hat\\sigma^2 = S_{effect} / (n - p)$ is $\\chi^2_k$ under white Gaussian noise
+    when the effect is absent ($k \\le 2$ effect parameters); the threshold is the
+    $\\chi^2_2$ quantile at $\\alpha / m$ for the $m$ classes compared,
+    $2 \\ln(m / \\alpha)$, which bounds the $\\chi^2_1$ one too. Because the test
+    trusts the noise to be white and the re-fit to be at its optimum, a candidate
+    it selects must also improve on the re-fit on validation with $z > 2$."""
+    sse = np.where(np.isfinite(fit["sse_est"]), fit["sse_est"], np.inf)
+    best = min(structural, key=lambda c: sse[c.row])
+    n_slots = prep.arrays.anchor.shape[0]
+    p = int(np.sum(np.asarray(prep.rows[best.row][1].idx) < n_slots))
+    s2 = sse[best.row] / max(prep.n_est - p, 1)
+    lr = float((sse[pm.row] - sse[best.row]) / s2) if s2 > 0 else 0.0
+    threshold = 2.0 * np.log(len(structural) / LR_ALPHA)
+    z = improvement_z(pm.residual, best.residual)
+    return {
+        "lr": lr if np.isfinite(lr) else 0.0,
+        "threshold": float(threshold),
+        "z_validation": z,
+        "best": best.effect,
+        "significant": bool(np.isfinite(lr) and lr > threshold and z > Z_CONFIRM),
+    }
 
 
 def attribute(prep: Prepared, fit: dict) -> Attribution:
@@ -197,8 +232,13 @@ def attribute(prep: Prepared, fit: dict) -> Attribution:
             "best": best_s.effect,
         }
         tests["refit_vs_nominal"] = {"z": z_p, "significant": p_sig}
+        lr_test = _nested_lr(prep, fit, pm, structural)
+        tests["structural_lr"] = lr_test
         if s_sig:
             effect, chosen = best_s.effect, best_s
+        elif lr_test["significant"]:
+            effect = lr_test["best"]
+            chosen = next(c for c in structural if c.effect == effect)
         elif p_sig:
             effect, chosen = "parameter_mismatch", pm
         else:

@@ -224,7 +224,7 @@ def filter_df2t(b: Array, a: Array, u: Array) -> Array:
         z = jnp.concatenate([z[1:], jnp.zeros(1, z.dtype)]) + b[1:] * uk - a[1:] * yk
         return z, yk
 
-    _, y = lax.scan(step, jnp.zeros(n, u.dtype), u, unroll=2)
+    _, y = lax.scan(step, jnp.zeros(n, u.dtype), u, unroll=1)
     return y
 
 
@@ -239,7 +239,7 @@ def input_memory(
         xb = play_step(xb, xr, width)
         return (xr, xb), xb
 
-    _, x = lax.scan(step, (v[0], v[0]), v, unroll=2)
+    _, x = lax.scan(step, (v[0], v[0]), v, unroll=1)
     return x
 
 

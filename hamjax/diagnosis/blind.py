@@ -310,11 +310,25 @@ def _rms(x):
 def make_case(key, *, realism: str = "exact") -> dict:
     """One withheld-effect case.
 
+    An effect that does not show in both records (say an output saturation the
+    validation output never reaches) is no effect at all: it is drawn again, from
+    keys folded from `key`, so every case keeps a known, visible effect.
+
     **Returns:** `{"model": model.json dict, "estimation": {t, v, y},
     "validation": {...}, "truth": {...}}` (NumPy arrays).
     """
     if realism not in ("exact", "realistic"):
         raise ValueError(f"realism must be 'exact' or 'realistic'; got {realism!r}")
+    for attempt in range(100):
+        case = _draw_case(
+            key if attempt == 0 else jr.fold_in(key, 104729 + attempt), realism
+        )
+        if case is not None:
+            return case
+    raise RuntimeError("no visible effect in 100 draws")  # pragma: no cover
+
+
+def _draw_case(key, realism: str) -> dict | None:
     realistic = realism == "realistic"
     d = _Draw(key)
     dt = 0.05
@@ -355,8 +369,14 @@ def make_case(key, *, realism: str = "exact") -> dict:
         params["w_lo"] = w
         params["w_hi"] = w * (d.uniform(0.5, 1.5) if realistic else 1.0)
     elif effect == "saturation":
-        params["lo"] = float(np.quantile(u_est, d.uniform(0.03, 0.3)))
-        params["hi"] = float(np.quantile(u_est, d.uniform(0.7, 0.97)))
+        lo = float(np.quantile(u_est, d.uniform(0.03, 0.3)))
+        hi = float(np.quantile(u_est, d.uniform(0.7, 0.97)))
+        # a map with a wide flat part (a dead band of F) can put both quantiles at
+        # the same level, i.e. no input left at all: keep a band of 0.2 std(u)
+        band = 0.2 * float(np.std(u_est))
+        if hi - lo < band:
+            lo, hi = (lo + hi - band) / 2, (lo + hi + band) / 2
+        params["lo"], params["hi"] = lo, hi
     elif effect == "preload":
         params["c"] = d.uniform(0.05, 0.3) * float(np.std(u_est))
         params["eps"] = d.uniform(0.01, 0.05)
@@ -396,6 +416,10 @@ def make_case(key, *, realism: str = "exact") -> dict:
     effect_rms = min(
         _rms(ws[name] - w_nominal[name]) for name in ("estimation", "validation")
     )
+    if effect in DETERMINISTIC and not effect_rms > 1e-6 * _rms(
+        w_nominal["validation"]
+    ):
+        return None
     if effect in DETERMINISTIC:
         ratio = d.log_uniform(0.3, 10.0) if realistic else d.log_uniform(1.5, 20.0)
         sigma = effect_rms / ratio

@@ -260,11 +260,17 @@ def prepare(
         i = names.index(name)
         neutral[i] = EFFECT_NEUTRAL[name]
         scale[i] = effect_scale[name]
-    refit = ["gain"] + [f"den{j + 1}" for j in den_free]
+    refit = [f"den{j + 1}" for j in den_free]
     if nom.nl_kind == NL_PIECEWISE:
         refit += ["k1", "k2", "d1", "d2", "l1", "l2"]
     elif nom.nl_kind == NL_TABULATED:
         refit += ["in_scale", "out_scale"]
+    else:
+        # With a piecewise-linear or tabulated map the static gain is not a
+        # separate parameter: G's gain times F is F with its slopes and levels (or
+        # its output scale) scaled, so re-fitting both leaves an exact ridge along
+        # which the fit wanders and Levenberg-Marquardt crawls.
+        refit = ["gain", *refit]
     P = n_params or len(refit) + MAX_EFFECT_SLOTS
     taus_tried = _delay_shortlist(est["y"], w_est)
     rows = []
@@ -330,8 +336,8 @@ def n_free_parameters(plant: Hammerstein) -> int:
     """Width of the compact parameter vector this plant's rows need."""
     nom = describe_nominal(plant)
     n_den = nom.order if nom.is_ct else nom.den.shape[0] - 1
-    extra = {NL_PIECEWISE: 6, NL_TABULATED: 2}.get(nom.nl_kind, 0)
-    return 1 + n_den + extra + MAX_EFFECT_SLOTS
+    nl = {NL_PIECEWISE: 6, NL_TABULATED: 2}.get(nom.nl_kind, 1)  # 1: the gain
+    return n_den + nl + MAX_EFFECT_SLOTS
 
 
 def _delay_shortlist(y: np.ndarray, w: np.ndarray, keep: int = 2) -> tuple[int, ...]:

@@ -126,7 +126,10 @@ def report_markdown(d, name: str = "case") -> str:
     lines += [
         "",
         "Rule: held-out validation improvement with batch-means z > 3.5 and above "
-        "2 % of the noise variance (see `hamjax.diagnosis.attribute`).",
+        "2 % of the noise variance (z > 3 for a structural effect against the "
+        "re-fit), or a structural effect whose likelihood ratio against the re-fit "
+        "on the estimation record exceeds the Bonferroni chi-square threshold and "
+        "that validation confirms (z > 2); see `hamjax.diagnosis.attribute`.",
         "",
     ]
     return "\n".join(lines)

@@ -42,7 +42,8 @@ def run(key, *, realisations, chunk, out, quiet, args) -> dict:
         cases = [read_case(folder / "cases" / n) for n in names]
         start = time.perf_counter()
         res = diagnose_many(
-            [(c.model, c.dt, c.estimation, c.validation) for c in cases], chunk=chunk
+            [(c.model, c.dt, c.estimation, c.validation) for c in cases],
+            cases_per_batch=chunk,
         )
         seconds = time.perf_counter() - start
         named = {n: r.effect for n, r in zip(names, res, strict=False)}

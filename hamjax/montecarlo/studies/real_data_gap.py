@@ -49,7 +49,7 @@ def run(key, *, realisations, chunk, out, quiet, args) -> dict:
         )
         items.append((plant, c.dt, c.estimation, c.validation))
         kept.append(n)
-    res = diagnose_many(items, chunk=chunk)
+    res = diagnose_many(items, cases_per_batch=chunk)
     rows = [
         "| case | effect named | gap before | gap after | noise floor | literature |",
         "|---|---|---|---|---|---|",

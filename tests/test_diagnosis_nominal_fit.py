@@ -32,6 +32,7 @@ def test_two_level_input_gets_a_linear_nominal():
     rec = _record(plant, v, dt)
     fitted = fit_nominal(dt, rec)
     assert isinstance(fitted.nonlinearity, hj.Identity)
+    assert np.max(np.abs(np.roots(np.asarray(fitted.linear.a)))) < 1
     err = np.asarray(hj.simulate(fitted, v, dt=dt)) - rec["y"]
     assert _rms(err) < 1e-6 * np.ptp(rec["y"])
 
@@ -57,6 +58,7 @@ def test_rich_input_through_a_dead_zone_map_gets_a_piecewise_linear_nominal():
     y = rec["y"]
     fitted = fit_nominal(dt, rec)
     assert isinstance(fitted.nonlinearity, hj.PiecewiseLinear)
+    assert np.max(np.abs(np.roots(np.asarray(fitted.linear.a)))) < 1
     err = _rms(np.asarray(hj.simulate(fitted, v, dt=dt)) - y)
     linear = []
     for n in (1, 2, 3):

@@ -8,7 +8,8 @@ Each order is started from the least-squares ARX fit with $F$ = identity and the
 refined by output-error least squares over the poles and either the six
 piecewise-linear parameters or the gain (the numerator shape stays the ARX one).
 The identity map is what an input with only a few levels (two, in a step test)
-can determine; a piecewise-linear map there is not identifiable.
+can determine; a piecewise-linear map there is not identifiable. Fits whose
+poles left the unit circle are not candidates.
 """
 
 import jax.numpy as jnp
@@ -60,9 +61,12 @@ def fit_nominal(dt: float, estimation: dict) -> Hammerstein:
             bic = v.shape[0] * np.log(max(sse, 1e-300) / v.shape[0]) + k * np.log(
                 v.shape[0]
             )
-            if not (np.isfinite(bic) and bic < best_bic):
-                continue
             den = np.r_[1.0, [p[names.index(f"den{j}")] for j in range(1, n + 1)]]
+            # the output-error fit does not constrain the poles: an unstable
+            # nominal fits the estimation record and diverges on any other
+            stable = np.all(np.isfinite(den)) and np.max(np.abs(np.roots(den))) < 1
+            if not (stable and np.isfinite(bic) and bic < best_bic):
+                continue
             gain = p[names.index("gain")]  # 1 beside a piecewise-linear map
             fitted = Identity()
             if pl:

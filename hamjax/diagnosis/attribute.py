@@ -53,7 +53,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .augmented import EFFECT_SLOTS, NL_PIECEWISE, slot_names
-from .layout import DETERMINISTIC, N_MAX, Prepared
+from .layout import (
+    DETERMINISTIC,
+    N_MAX,
+    Prepared,
+    best_row_per_class,
+    finite_sse,
+)
 from .noise_fit import noise_fit_numpy
 from .residuals import improvement_z, noise_floor_hf
 
@@ -128,7 +134,9 @@ def _params(prep: Prepared, fit: dict, row: int, effect: str) -> dict:
     return out
 
 
-def _nested_lr(prep: Prepared, fit: dict, pm: Candidate, structural: list) -> dict:
+def _nested_lr(
+    prep: Prepared, sse: np.ndarray, pm: Candidate, structural: list
+) -> dict:
     """The likelihood-ratio test of the best structural candidate on estimation data
     (lowest estimation SSE) against the re-fit it nests, confirmed on validation.
 
@@ -139,7 +147,6 @@ def _nested_lr(prep: Prepared, fit: dict, pm: Candidate, structural: list) -> di
     $2 \\ln(m / \\alpha)$, which bounds the $\\chi^2_1$ one too. Because the test
     trusts the noise to be white and the re-fit to be at its optimum, a candidate
     it selects must also improve on the re-fit on validation with $z > 2$."""
-    sse = np.where(np.isfinite(fit["sse_est"]), fit["sse_est"], np.inf)
     best = min(structural, key=lambda c: sse[c.row])
     n_slots = prep.arrays.anchor.shape[0]
     p = int(np.sum(np.asarray(prep.rows[best.row][1].idx) < n_slots))
@@ -165,14 +172,13 @@ def attribute(prep: Prepared, fit: dict) -> Attribution:
     n_val = prep.n_val
     y_val = np.asarray(prep.arrays.y_val)[:n_val]
     r_before = y_val - prep.w_val
-    names = [name for name, _ in prep.rows]
-    sse = np.where(np.isfinite(fit["sse_est"]), fit["sse_est"], np.inf)
+    sse = finite_sse(fit)
+    best_rows = best_row_per_class(prep, sse)
     cands: dict[str, Candidate] = {}
     for effect in DETERMINISTIC_NAMES:
         if effect == "dead_zone" and prep.nominal.nl_kind == NL_PIECEWISE:
             continue
-        rows = [i for i, n in enumerate(names) if n == effect]
-        best = min(rows, key=lambda i: sse[i])
+        best = best_rows[effect]
         pred = fit["y_val"][best][:n_val]
         res = y_val - pred
         if not np.all(np.isfinite(res)):
@@ -232,7 +238,7 @@ def attribute(prep: Prepared, fit: dict) -> Attribution:
             "best": best_s.effect,
         }
         tests["refit_vs_nominal"] = {"z": z_p, "significant": p_sig}
-        lr_test = _nested_lr(prep, fit, pm, structural)
+        lr_test = _nested_lr(prep, sse, pm, structural)
         tests["structural_lr"] = lr_test
         if s_sig:
             effect, chosen = best_s.effect, best_s

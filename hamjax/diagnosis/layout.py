@@ -332,6 +332,21 @@ def prepare(
     return Prepared(arrays, rows, ctx, nom, n_est, n_val, w_est, w_val, u_val)
 
 
+def finite_sse(fits: dict) -> np.ndarray:
+    """Each row's estimation SSE, a failed (non-finite) fit counting as infinite."""
+    return np.where(np.isfinite(fits["sse_est"]), fits["sse_est"], np.inf)
+
+
+def best_row_per_class(prep: Prepared, sse: np.ndarray) -> dict[str, int]:
+    """`{class name: its row with the lowest estimation SSE}` (first one on ties);
+    the finishing stage and the attribution must agree on it."""
+    best: dict[str, int] = {}
+    for k, (name, _) in enumerate(prep.rows):
+        if name not in best or sse[k] < sse[best[name]]:
+            best[name] = k
+    return best
+
+
 def n_free_parameters(plant: Hammerstein) -> int:
     """Width of the compact parameter vector this plant's rows need."""
     nom = describe_nominal(plant)

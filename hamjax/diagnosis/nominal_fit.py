@@ -12,7 +12,6 @@ can determine; a piecewise-linear map there is not identifiable. Fits whose
 poles left the unit circle are not candidates.
 """
 
-import jax.numpy as jnp
 import jax.tree_util as jtu
 import numpy as np
 
@@ -52,7 +51,7 @@ def fit_nominal(dt: float, estimation: dict) -> Hammerstein:
             start = Hammerstein(nl, DiscreteTransferFunction(b, a, dt))
             prep = prepare(start, dt, estimation, estimation, n_params=n_params)
             rows = [r for name, r in prep.rows if name == "parameter_mismatch"]
-            stacked = jtu.tree_map(lambda *x: jnp.stack(x), *rows)
+            stacked = jtu.tree_map(lambda *x: np.stack(x), *rows)
             fit = fit_rows(stacked, prep.arrays, NOMINAL_STEPS)
             sse = float(fit.sse_est[0])
             p = np.asarray(fit.params[0])
@@ -62,12 +61,19 @@ def fit_nominal(dt: float, estimation: dict) -> Hammerstein:
                 v.shape[0]
             )
             den = np.r_[1.0, [p[names.index(f"den{j}")] for j in range(1, n + 1)]]
+            gain = p[names.index("gain")]  # 1 beside a piecewise-linear map
+            if not (
+                np.isfinite(bic)
+                and bic < best_bic
+                and np.all(np.isfinite(den))
+                and np.isfinite(gain)
+            ):
+                continue
+            linear = DiscreteTransferFunction(gain * b, den, dt)
             # the output-error fit does not constrain the poles: an unstable
             # nominal fits the estimation record and diverges on any other
-            stable = np.all(np.isfinite(den)) and np.max(np.abs(np.roots(den))) < 1
-            if not (stable and np.isfinite(bic) and bic < best_bic):
+            if not linear.is_stable():
                 continue
-            gain = p[names.index("gain")]  # 1 beside a piecewise-linear map
             fitted = Identity()
             if pl:
                 vals = {
@@ -76,7 +82,7 @@ def fit_nominal(dt: float, estimation: dict) -> Hammerstein:
                 }
                 vals["d1"], vals["d2"] = max(vals["d1"], 0.0), min(vals["d2"], 0.0)
                 fitted = PiecewiseLinear(**vals)
-            best = Hammerstein(fitted, DiscreteTransferFunction(gain * b, den, dt))
+            best = Hammerstein(fitted, linear)
             best_bic = bic
     if best is None:
         return Hammerstein(Identity(), DiscreteTransferFunction(*_arx(v, y, 1), dt))

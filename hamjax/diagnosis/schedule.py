@@ -27,9 +27,10 @@ import jax
 import jax.tree_util as jtu
 import numpy as np
 
+from ..montecarlo.sharding import effective_chunk
 from .augmented import Row
 from .fit import LAMBDA0, RowFit, fit_batch, theta_std
-from .layout import Prepared
+from .layout import Prepared, best_row_per_class, finite_sse
 
 
 REFIT = "parameter_mismatch"
@@ -75,11 +76,8 @@ def finishing_items(c: int, prep: Prepared, fits: dict) -> list[Item]:
       change the decision on the development benchmark, and continuing every
       class doubled the cost.
     """
-    sse = np.where(np.isfinite(fits["sse_est"]), fits["sse_est"], np.inf)
-    best: dict[str, int] = {}
-    for k, (name, _) in enumerate(prep.rows):
-        if name not in best or sse[k] < sse[best[name]]:
-            best[name] = k
+    sse = finite_sse(fits)
+    best = best_row_per_class(prep, sse)
     i_pm = best.pop(REFIT)
     lead = sorted(best.values(), key=lambda k: sse[k])[:CONTINUE_CLASSES]
     used = np.asarray(prep.rows[i_pm][1].idx) < prep.arrays.anchor.shape[0]
@@ -122,9 +120,7 @@ def batch_size(preps: list[Prepared], cases_per_batch: int = 8) -> int:
     """Rows per batch: the screening rows of `cases_per_batch` cases (fewer when
     the call has fewer cases), a multiple of the device count."""
     rows = max(len(p.rows) for p in preps)
-    n = rows * min(cases_per_batch, len(preps))
-    n_dev = jax.device_count()
-    return -(-n // n_dev) * n_dev
+    return effective_chunk(rows * min(cases_per_batch, len(preps)), jax.device_count())
 
 
 def run_queue(

@@ -70,6 +70,12 @@ def finishing_items(c: int, prep: Prepared, fits: dict) -> list[Item]:
       below it often marks a local minimum of the re-fit from the nominal start
       rather than an effect; the restart finds the re-fit's better minimum
       (kept only if its estimation SSE is lower).
+    - The leading structural row restarted the other way round: its effect
+      parameters as screened, its nominal part back at the nominal values. While
+      the effect's parameters are still far off, the nominal part drifts to
+      compensate and can stay in a valley once the effect is in place (an output
+      clip found exactly, the map's levels left 25-40 % off); the nominal
+      model is the better start for them (kept only if its SSE is lower).
     - The best rows of the `CONTINUE_CLASSES` leading structural classes (by
       estimation SSE), continued if they stopped: an unfinished row of the true
       effect lets another effect win. Classes further down were measured not to
@@ -88,6 +94,8 @@ def finishing_items(c: int, prep: Prepared, fits: dict) -> list[Item]:
     ]
     restart = np.where(used, fits["theta"][lead[0]], 0.0)  # nominal part only
     out.append(Item(c, i_pm, restart, LAMBDA0, FINISH_STEPS, "finish", "lower"))
+    back = np.where(used, 0.0, fits["theta"][lead[0]])  # effect part only
+    out.append(Item(c, lead[0], back, LAMBDA0, FINISH_STEPS, "finish", "lower"))
     return out
 
 

@@ -23,8 +23,13 @@ class SaturationEffect(AbstractEffect):
     slots = ("sat_lo", "sat_hi")
 
     def starts(self, ctx: StartContext) -> list[dict[str, float]]:
+        """Limits at nominal-u quantiles: both light, both heavy, and one side
+        only (the other limit at the 2 % / 98 % quantile, where it still bites and
+        keeps its gradient). A limit started far inside the range it truly clips
+        little of has to walk out while the re-fitted map and poles compensate it;
+        on a slow plant that fit stalled (blind seed 301, case 137)."""
         out = []
-        for lo, hi in ((0.1, 0.9), (0.3, 0.7)):
+        for lo, hi in ((0.1, 0.9), (0.3, 0.7), (0.1, 0.98), (0.02, 0.9)):
             a, b = quantile_pair(ctx, lo, hi)
             out.append({"sat_lo": a, "sat_hi": b})
         return out

@@ -151,39 +151,32 @@ def test_refit_restarted_from_structural_row_leaves_a_local_minimum():
 
 @pytest.mark.slow
 def test_structural_row_restarted_from_the_nominal_leaves_a_local_minimum():
-    # A saturation case: plant a fake local minimum in the saturation row (its
-    # limits at their optimum, its nominal part far off, marked converged, its SSE
-    # twice the optimum, still the lowest of the structural rows). The finishing
-    # stage must restart it from its limits with the nominal part at the nominal
+    # A saturation case: plant a fake local minimum in every saturation row (limits
+    # at their optimum, nominal part far off, marked converged, SSE twice the
+    # optimum: still the lowest structural class). The finishing stage must restart
+    # the class's best row from its limits with the nominal part at the nominal
     # values and land on the optimum of an uninterrupted fit from its own start.
     plant, dt, est, val = tiny_case(jr.key(4), "saturation", noise=1e-3)
     prep = prepare(plant, dt, est, val)
     full = _all_rows(prep, 200)
     names = [name for name, _ in prep.rows]
-    sat = min(
-        (k for k, n in enumerate(names) if n == "saturation"),
-        key=lambda k: full["sse_est"][k],
-    )
+    sat_rows = [k for k, n in enumerate(names) if n == "saturation"]
+    best = min(sat_rows, key=lambda k: full["sse_est"][k])
     structural = [k for k, n in enumerate(names) if n != REFIT]
-    assert full["sse_est"][sat] == full["sse_est"][structural].min()
+    assert full["sse_est"][best] == full["sse_est"][structural].min()
     nominal = np.asarray(prep.rows[names.index(REFIT)][1].idx) < len(prep.arrays.anchor)
     bad = {k: v.copy() for k, v in full.items()}
-    for k in (k for k, n in enumerate(names) if n == "saturation"):  # every start
-        bad["theta"][k] = np.where(
-            nominal, full["theta"][sat] + 3.0, full["theta"][sat]
-        )
-        bad["sse_est"][k] = 2.0 * full["sse_est"][sat]
-        bad["result"][k] = 0
-    items = [
-        it for it in finishing_items(0, prep, bad) if names[it.row] == "saturation"
-    ]
+    bad["theta"][sat_rows] = np.where(nominal, 3.0, 0.0) + full["theta"][best]
+    bad["sse_est"][sat_rows] = 2.0 * full["sse_est"][best]
+    bad["result"][sat_rows] = 0
+    items = [it for it in finishing_items(0, prep, bad) if it.row in sat_rows]
     assert [it.replace for it in items] == ["lower"]
-    sat = items[0].row
     rows = [_stack([r for _, r in prep.rows])]
     arrays = _stack([prep.arrays])
-    out = run_batch(items, [200] * len(items), rows, arrays, len(items))
+    out = run_batch(items, [200], rows, arrays, 1)
     merge(bad, items[0], {name: x[0] for name, x in out.items()})
-    np.testing.assert_allclose(bad["sse_est"][sat], full["sse_est"][sat], rtol=1e-6)
+    k = items[0].row
+    np.testing.assert_allclose(bad["sse_est"][k], full["sse_est"][k], rtol=1e-6)
 
 
 @pytest.mark.slow

@@ -13,7 +13,7 @@ import pytest
 from helpers import run_on_two_devices
 
 import hamjax.diagnosis.schedule as schedule
-from hamjax.diagnosis.augmented import slot_index
+from hamjax.diagnosis.augmented import slot_index, uses_memory
 from hamjax.diagnosis.fit import LAMBDA0, fit_batch, theta_std
 from hamjax.diagnosis.layout import N_MAX, prepare
 from hamjax.diagnosis.schedule import (
@@ -119,6 +119,32 @@ def test_resumed_fit_is_the_uninterrupted_fit():
         np.asarray(straight.sse_est)[moving],
         rtol=1e-6,
     )
+
+
+@pytest.mark.slow
+def test_batch_without_memory_rows_skips_the_memory_scan_exactly():
+    # `_fit_flat` skips the input-memory scan (rate limit, backlash) in a batch in
+    # which no row frees either. At their neutral values the scan is the identity,
+    # so rows fitted in a batch that runs it (one backlash row in the last place) and
+    # in one that skips it agree to rounding (same rows, same places, same width);
+    # and the backlash row, fitted with the scan, closes a gap the re-fit cannot.
+    prep = prepare(*tiny_case(jr.key(5), "backlash", noise=1e-3))
+    names = [name for name, _ in prep.rows]
+    plain = [k for k, (_, r) in enumerate(prep.rows) if not uses_memory(r.free)]
+    assert 0 < len(plain) < len(names)
+
+    def fit(ks):
+        rows = _stack([prep.rows[k][1] for k in ks])
+        cases = _stack([prep.arrays] * len(ks))
+        n = len(ks)
+        return np.asarray(
+            fit_batch(rows, cases, np.full(n, 20), np.full(n, LAMBDA0)).sse_est
+        )
+
+    without = fit(plain)
+    with_scan = fit(plain[:-1] + [names.index("backlash")])
+    np.testing.assert_allclose(with_scan[:-1], without[:-1], rtol=1e-9)
+    assert with_scan[-1] < 0.1 * without[plain.index(names.index(REFIT))]
 
 
 @pytest.mark.slow

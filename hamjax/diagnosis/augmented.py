@@ -142,14 +142,17 @@ def _expm(M: Array, squarings: int = 12, order: int = 10) -> Array:
     branches, so it compiles small under `vmap`/`jvp`; exact to rounding for
     $\\|M\\| \\lesssim 10^3$, far beyond any sensible $|p|\\,dt$)."""
     A = M / 2.0**squarings
-    term = jnp.eye(M.shape[0], dtype=M.dtype)
-    E = term
-    for k in range(1, order + 1):
-        term = term @ A / k
-        E = E + term
-    for _ in range(squarings):
-        E = E @ E
-    return E
+
+    def taylor(k, carry):  # term_k = term_{k-1} A / k
+        term, E = carry
+        term = term @ A / k.astype(M.dtype)
+        return term, E + term
+
+    eye = jnp.eye(M.shape[0], dtype=M.dtype)
+    # Loops rather than unrolled products: the same arithmetic, a fraction of the
+    # compiled program (this sits inside every Levenberg-Marquardt step).
+    _, E = lax.fori_loop(1, order + 1, taylor, (eye, eye))
+    return lax.fori_loop(0, squarings, lambda _, E: E @ E, E)
 
 
 def _companion(num: Array, den: Array) -> tuple[Array, Array, Array, Array]:
@@ -244,9 +247,18 @@ def input_memory(
 
 
 def simulate_augmented(
-    p: Float[Array, " S"], tau: Int[Array, ""], v: Float[Array, " L"], case: CaseArrays
+    p: Float[Array, " S"],
+    tau: Int[Array, ""],
+    v: Float[Array, " L"],
+    case: CaseArrays,
+    memory: bool | Bool[Array, ""] = True,
 ) -> Float[Array, " L"]:
-    """Output of the augmented model at physical parameters `p`, from rest."""
+    """Output of the augmented model at physical parameters `p`, from rest.
+
+    `memory=False` skips the input-memory scan (rate limit and backlash), which is
+    exact when both are at their neutral values; a traced `memory` that is the same
+    for a whole batch (not mapped over) skips it at run time for that batch.
+    """
     n_max = case.b_disc.shape[0] - 1
     at = {name: p[i] for i, name in enumerate(slot_names(n_max))}
     b, a = linear_polynomials(p, case)
@@ -255,7 +267,11 @@ def simulate_augmented(
     b = jnp.convolve(b, jnp.stack([1 - pole, jnp.zeros(())]))
     a = jnp.convolve(a, jnp.stack([jnp.ones(()), -pole]))
     v = delay(v, tau)
-    x = input_memory(v, at["rate"] * case.dt, at["backlash"])
+    args = (v, at["rate"] * case.dt, at["backlash"])
+    if memory is True:
+        x = input_memory(*args)
+    else:
+        x = lax.cond(memory, input_memory, lambda v, *_: v, *args)
     vd = dead_zone(x, at["dz_lo"], at["dz_hi"])
     u = add_preload(static_map(vd, p, case), vd, at["preload"])
     u = saturate(u, at["sat_lo"], at["sat_hi"])
@@ -273,10 +289,23 @@ def simulate_augmented(
 
 
 def simulate_row(
-    theta: Float[Array, " P"], row: Row, v: Float[Array, " L"], case: CaseArrays
+    theta: Float[Array, " P"],
+    row: Row,
+    v: Float[Array, " L"],
+    case: CaseArrays,
+    memory: bool | Bool[Array, ""] = True,
 ) -> Float[Array, " L"]:
     """`simulate_augmented` at a row's compact parameters."""
-    return simulate_augmented(full_parameters(theta, row, case), row.tau, v, case)
+    p = full_parameters(theta, row, case)
+    return simulate_augmented(p, row.tau, v, case, memory)
+
+
+def uses_memory(free: Bool[Array, "*batch S"]) -> Bool[Array, "*batch"]:
+    """Whether rows with these free slots need the input-memory scan."""
+    n_max = free.shape[-1] - len(NOMINAL_SLOTS) - len(EFFECT_SLOTS)
+    return (
+        free[..., slot_index("rate", n_max)] | free[..., slot_index("backlash", n_max)]
+    )
 
 
 simulate_rows = jax.vmap(simulate_row, in_axes=(0, 0, None, None))

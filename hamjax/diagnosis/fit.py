@@ -17,6 +17,7 @@ from .augmented import (
     Row,
     full_parameters,
     simulate_row,
+    uses_memory,
 )
 
 
@@ -48,8 +49,8 @@ def nominal_mask(row: Row, case: CaseArrays) -> Bool[Array, " P"]:
 
 
 def _residuals(theta, args):
-    row, case = args
-    y = simulate_row(theta, row, case.v_est, case)
+    row, case, memory = args
+    y = simulate_row(theta, row, case.v_est, case, memory)
     r = (y - case.y_est) * case.m_est / case.y_scale
     # A diverging trial step must not poison the Jacobian: a large finite value
     # makes Levenberg-Marquardt reject the step instead.
@@ -124,11 +125,17 @@ def levenberg_marquardt(theta0, lam0, args, max_steps):
 
 
 def fit_row(
-    row: Row, case: CaseArrays, max_steps=30, lam0: float | Array = LAMBDA0
+    row: Row,
+    case: CaseArrays,
+    max_steps=30,
+    lam0: float | Array = LAMBDA0,
+    memory: bool | Bool[Array, ""] = True,
 ) -> RowFit:
-    """Fit one row from `row.theta0` (the nominal slots start at nominal)."""
+    """Fit one row from `row.theta0` (the nominal slots start at nominal).
+    `memory`: as in `simulate_augmented` (False only if the row frees neither
+    the rate limit nor the backlash)."""
     theta, r, J, done, lam, k = levenberg_marquardt(
-        row.theta0, lam0, (row, case), max_steps
+        row.theta0, lam0, (row, case, memory), max_steps
     )
     L = case.v_est.shape[0]
     r, J = r[:L], J[:L]  # the record's part (the prior's is not data)
@@ -136,7 +143,7 @@ def fit_row(
     n = jnp.sum(case.m_est)
     used = row.idx < case.anchor.shape[0]
     dof = jnp.maximum(n - jnp.sum(used), 1.0)
-    y_val = simulate_row(theta, row, case.v_val, case)
+    y_val = simulate_row(theta, row, case.v_val, case, memory)
     bad = ~jnp.isfinite(sse)
     return RowFit(
         theta=theta,
@@ -178,7 +185,12 @@ def fit_rows(rows: Row, case: CaseArrays, max_steps=30) -> RowFit:
 
 
 def _fit_flat(rows: Row, cases: CaseArrays, max_steps, lam0) -> RowFit:
-    return jax.vmap(fit_row)(rows, cases, max_steps, lam0)
+    # One flag for the whole (per-device) batch, not mapped over: a batch in which
+    # no row frees the rate limit or the backlash skips the input-memory scan (a
+    # quarter of a fit's cost); `schedule` groups those rows into their own batches.
+    memory = jnp.any(uses_memory(rows.free))
+    fit = lambda r, c, k, lam: fit_row(r, c, k, lam, memory)  # noqa: E731
+    return jax.vmap(fit)(rows, cases, max_steps, lam0)
 
 
 @eqx.filter_jit

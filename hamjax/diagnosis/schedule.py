@@ -28,7 +28,7 @@ import jax.tree_util as jtu
 import numpy as np
 
 from ..montecarlo.sharding import effective_chunk
-from .augmented import Row
+from .augmented import Row, uses_memory
 from .fit import LAMBDA0, RowFit, fit_batch, theta_std
 from .layout import Prepared, best_row_per_class, finite_sse
 
@@ -142,19 +142,19 @@ def run_queue(
     queues: dict[str, deque] = {s: deque() for s in ("screen", "finish", "more")}
     fits: list[dict | None] = [None] * len(preps)
     outstanding = [len(p.rows) for p in preps]
-    for c, p in enumerate(preps):
-        for k, (_, row) in enumerate(p.rows):
-            queues["screen"].append(
-                Item(
-                    c,
-                    k,
-                    np.asarray(row.theta0),
-                    LAMBDA0,
-                    SCREEN_STEPS,
-                    "screen",
-                    "always",
-                )
-            )
+    screen = [
+        Item(c, k, np.asarray(row.theta0), LAMBDA0, SCREEN_STEPS, "screen", "always")
+        for c, p in enumerate(preps)
+        for k, (_, row) in enumerate(p.rows)
+    ]
+    # The rows that need the input-memory scan (rate limit, backlash) first, together:
+    # the batches (per device) left without any skip that scan (`fit._fit_flat`).
+    memory = [
+        bool(uses_memory(np.asarray(preps[it.case].rows[it.row][1].free)))
+        for it in screen
+    ]
+    queues["screen"].extend(it for it, m in zip(screen, memory, strict=True) if m)
+    queues["screen"].extend(it for it, m in zip(screen, memory, strict=True) if not m)
     arrays = jtu.tree_map(lambda *x: np.stack(x), *[p.arrays for p in preps])
     rows = [
         jtu.tree_map(lambda *x: np.stack(x), *[r for _, r in p.rows]) for p in preps

@@ -11,7 +11,8 @@ the ratio scipy s/case / hamjax s/case (issue 7 asks for >= 2)?
     python studies/scipy_reference_diagnosis.py --cases results/blind/realistic \
         --out results/scipy-reference [--limit N] [--workers W] [--skip-hamjax]
 
-Writes OUT/scipy_reference.json (accuracy, false alarm on `none`, confusion counts,
+Writes OUT/scipy_reference.json (accuracy, false alarm on `none`, confusion and median
+shrink, scored by `hamjax blind score`'s code,
 s/case of both methods and their ratio, machine info, command line) and
 OUT/scipy/<case>/diagnosis.json. hamjax runs as one fresh process,
 `python -m hamjax diagnose CASES... --out OUT/hamjax`, so its time includes
@@ -544,62 +545,42 @@ def diagnose(est: dict, val: dict, dt: float, model: dict) -> dict:
     }
 
 
-def run_case(folder: str, out_dir: str) -> tuple[str, str | None]:
-    """Worker: diagnose one case folder and write OUT/<case>/diagnosis.json."""
+def run_case(folder: str, out_dir: str) -> tuple[str, dict | None, str | None]:
+    """Worker: diagnose one case folder and write OUT/<case>/diagnosis.json;
+    returns (case name, diagnosis or None, error or None)."""
     folder = Path(folder)
     try:
         result = diagnose(*read_case(folder))
     except StudyError as e:
-        return folder.name, f"{folder.name}: {e}"
+        return folder.name, None, f"{folder.name}: {e}"
     dest = Path(out_dir) / folder.name
     dest.mkdir(parents=True, exist_ok=True)
     (dest / "diagnosis.json").write_text(json.dumps(result, indent=1))
-    return folder.name, None
+    return folder.name, result, None
 
 
 # ------------------------------------------------------------------------ study
 
 
-def score(pred: dict, truth: dict) -> dict:
-    names = [nm for nm in pred if nm in truth]
-    confusion: dict = {}
-    for nm in names:
-        t = truth[nm]["effect"]
-        confusion.setdefault(t, {}).setdefault(pred[nm], 0)
-        confusion[t][pred[nm]] += 1
-    none_cases = [nm for nm in names if truth[nm]["effect"] == "none"]
-    return {
-        "cases_scored": len(names),
-        "accuracy": sum(pred[nm] == truth[nm]["effect"] for nm in names) / len(names)
-        if names
-        else None,
-        "false_alarm_on_none": sum(pred[nm] != "none" for nm in none_cases)
-        / len(none_cases)
-        if none_cases
-        else None,
-        "confusion": confusion,
-    }
+def score(diagnoses: dict, truth: dict) -> dict | None:
+    """`hamjax blind score`'s scoring of {case: diagnosis} (None without truth.json).
+    Scoring is study plumbing, not part of the reference, so it is hamjax's: both
+    methods are scored by the same code as the blind benchmark."""
+    if not truth:
+        return None
+    from hamjax.diagnosis.blind import score as blind_score
 
-
-def hamjax_command() -> list[str]:
-    probe = subprocess.run(
-        [sys.executable, "-m", "hamjax", "diagnose", "--help"],
-        capture_output=True,
-        env=_ORIGINAL_ENV,
-    )
-    if probe.returncode == 0:
-        return [sys.executable, "-m", "hamjax"]
-    script = Path(sys.executable).parent / "hamjax"
-    if script.exists():
-        return [str(script)]
-    raise StudyError(
-        "cannot run hamjax (neither `python -m hamjax` nor a hamjax script)"
-    )
+    named = {nm: d["effect"] for nm, d in diagnoses.items()}
+    gaps = {nm: (d["gap_before"], d["gap_after"]) for nm, d in diagnoses.items()}
+    cases = {nm: truth[nm] for nm in named if nm in truth}
+    return blind_score({"cases": cases}, named, gaps)
 
 
 def run_hamjax(folders: list[Path], out: Path) -> tuple[dict, float]:
     cmd = [
-        *hamjax_command(),
+        sys.executable,
+        "-m",
+        "hamjax",
         "diagnose",
         *map(str, folders),
         "--out",
@@ -615,23 +596,17 @@ def run_hamjax(folders: list[Path], out: Path) -> tuple[dict, float]:
     if proc.returncode != 0:
         last = (proc.stderr.strip().splitlines() or ["(no message)"])[-1]
         raise StudyError(f"hamjax diagnose failed (exit {proc.returncode}): {last}")
-    pred = {}
-    for f in folders:
-        path = (
-            out / "diagnosis.json"
-            if len(folders) == 1
-            else out / f.name / "diagnosis.json"
+    single = len(folders) == 1
+    return {
+        f.name: json.loads(
+            (out if single else out / f.name).joinpath("diagnosis.json").read_text()
         )
-        pred[f.name] = json.loads(path.read_text())["effect"]
-    return pred, wall
+        for f in folders
+    }, wall
 
 
 def machine_info(workers: int) -> dict:
-    def version(pkg):
-        try:
-            return metadata.version(pkg)
-        except metadata.PackageNotFoundError:
-            return None
+    from hamjax.montecarlo.storage import package_versions
 
     cpu = platform.processor()
     try:
@@ -646,10 +621,7 @@ def machine_info(workers: int) -> dict:
         "workers": workers,
         "cpu": cpu,
         "platform": platform.platform(),
-        "python": platform.python_version(),
-        "numpy": np.__version__,
-        "scipy": version("scipy"),
-        "jax": version("jax"),
+        "versions": package_versions() | {"scipy": metadata.version("scipy")},
     }
 
 
@@ -696,17 +668,12 @@ def study(args, command: list[str]) -> int:
             pool.map(run_case, map(str, folders), [str(scipy_out)] * len(folders))
         )
     wall_scipy = time.perf_counter() - t0
-    errors = [e for _, e in done if e]
+    errors = [e for _, _, e in done if e]
     if errors:
         raise StudyError(
             errors[0] + (f" (and {len(errors) - 1} more)" if len(errors) > 1 else "")
         )
-    pred_scipy = {
-        f.name: json.loads((scipy_out / f.name / "diagnosis.json").read_text())[
-            "effect"
-        ]
-        for f in folders
-    }
+    diagnoses = {name: d for name, d, _ in done}
     n = len(folders)
     summary = {
         "question": "accuracy and s/case of a careful scipy diagnosis vs hamjax diagnose",
@@ -717,7 +684,7 @@ def study(args, command: list[str]) -> int:
         "scipy": {
             "wall_s": wall_scipy,
             "s_per_case": wall_scipy / n,
-            **score(pred_scipy, truth),
+            **(score(diagnoses, truth) or {}),
         },
         "hamjax": None,
         "ratio_scipy_over_hamjax_s_per_case": None,
@@ -725,13 +692,13 @@ def study(args, command: list[str]) -> int:
         "included, its compilation cache off); scipy: ProcessPoolExecutor wall clock over all cases",
     }
     if not args.skip_hamjax:
-        pred_h, wall_h = run_hamjax(folders, out / "hamjax")
+        diagnoses_h, wall_h = run_hamjax(folders, out / "hamjax")
         summary["hamjax"] = {
             "wall_s": wall_h,
             "s_per_case": wall_h / n,
-            **score(pred_h, truth),
+            **(score(diagnoses_h, truth) or {}),
         }
-        summary["ratio_scipy_over_hamjax_s_per_case"] = (wall_scipy / n) / (wall_h / n)
+        summary["ratio_scipy_over_hamjax_s_per_case"] = wall_scipy / wall_h
     (out / "scipy_reference.json").write_text(json.dumps(summary, indent=1))
 
     print(f"{n} cases from {root}, {workers} workers")
@@ -740,8 +707,8 @@ def study(args, command: list[str]) -> int:
         s = summary[key]
         if s is None:
             continue
-        acc = "-" if s["accuracy"] is None else f"{s['accuracy']:.3f}"
-        fa = s["false_alarm_on_none"]
+        acc, fa = s.get("accuracy"), s.get("false_alarm_none")
+        acc = "-" if acc is None else f"{acc:.3f}"
         fa = "-" if fa is None else f"{fa:.3f}"
         print(f"{label:<18}{acc:>10}{fa:>13}{s['s_per_case']:>9.3f}")
     if summary["ratio_scipy_over_hamjax_s_per_case"] is not None:

@@ -142,23 +142,21 @@ def run_queue(
     queues: dict[str, deque] = {s: deque() for s in ("screen", "finish", "more")}
     fits: list[dict | None] = [None] * len(preps)
     outstanding = [len(p.rows) for p in preps]
-    screen = [
-        Item(c, k, np.asarray(row.theta0), LAMBDA0, SCREEN_STEPS, "screen", "always")
-        for c, p in enumerate(preps)
-        for k, (_, row) in enumerate(p.rows)
-    ]
-    # The rows that need the input-memory scan (rate limit, backlash) first, together:
-    # the batches (per device) left without any skip that scan (`fit._fit_flat`).
-    memory = [
-        bool(uses_memory(np.asarray(preps[it.case].rows[it.row][1].free)))
-        for it in screen
-    ]
-    queues["screen"].extend(it for it, m in zip(screen, memory, strict=True) if m)
-    queues["screen"].extend(it for it, m in zip(screen, memory, strict=True) if not m)
     arrays = jtu.tree_map(lambda *x: np.stack(x), *[p.arrays for p in preps])
     rows = [
         jtu.tree_map(lambda *x: np.stack(x), *[r for _, r in p.rows]) for p in preps
     ]  # per case, its rows stacked
+    # The rows that need the input-memory scan (rate limit, backlash) first, together:
+    # the batches (per device) left without any skip that scan (`fit._fit_flat`).
+    memory = [np.asarray(uses_memory(r.free)) for r in rows]
+    order = sorted(  # stable: otherwise in case order
+        ((c, k) for c, m in enumerate(memory) for k in range(m.shape[0])),
+        key=lambda ck: not memory[ck[0]][ck[1]],
+    )
+    queues["screen"].extend(
+        Item(c, k, rows[c].theta0[k], LAMBDA0, SCREEN_STEPS, "screen", "always")
+        for c, k in order
+    )
 
     def done(item: Item, new: dict) -> None:
         c = item.case

@@ -18,6 +18,7 @@ from hamjax.diagnosis.augmented import (
     simulate_row,
     simulate_rows,
     slot_index,
+    uses_memory,
 )
 from hamjax.diagnosis.effects.backlash import play_step
 from hamjax.diagnosis.effects.coloured_noise import ar1_errors, fit_ar1
@@ -28,6 +29,7 @@ from hamjax.diagnosis.effects.preload import add_preload
 from hamjax.diagnosis.effects.rate_limit import rate_limit_step
 from hamjax.diagnosis.effects.saturation import saturate
 from hamjax.diagnosis.effects.time_delay import delay
+from hamjax.diagnosis.fit import normal_equations
 from hamjax.diagnosis.layout import N_MAX, prepare
 from hamjax.diagnosis.residuals import improvement_z, ljung_box, noise_floor_hf
 
@@ -195,3 +197,43 @@ def test_fit_ar1_recovers_pole():
     a = fit_ar1(jnp.asarray(r), jnp.ones(r.shape[0]))
     # standard error of the AR(1) estimate: sqrt((1 - a^2)/N) = 0.0042; 5 se
     assert abs(float(a) - 0.8) < 5 * np.sqrt((1 - 0.64) / 20000)
+
+
+@pytest.mark.parametrize("plant", PLANTS)
+def test_blocked_normal_equations_equal_the_full_record_jacobian(plant, getkey):
+    # `fit.normal_equations` accumulates r^T r, J^T J and J^T r over 256-sample
+    # blocks, only up to the record's own length (300 samples: one full block and
+    # a partial one, in arrays padded to 1024). The reference is the forward-mode
+    # Jacobian of the full-length simulation (`simulate_row`, one `lax.scan` per
+    # record), at a perturbed point of every row. The two sum the same terms in a
+    # different order, so they agree to rounding (relative 1e-14 per term; 1e-9
+    # leaves room for the ~300-term sums and the filter's error growth).
+    est, val = _records(getkey())
+    est["y"] = np.asarray(jr.normal(getkey(), (300,)))
+    prep = prepare(plant, 0.05, est, val, length=1024)
+    A = prep.arrays
+    tabulated = isinstance(plant.nonlinearity, hj.Tabulated)
+    # flags as arrays: one compilation serves the run-time skips and the full model
+    blocked = jax.jit(normal_equations)
+
+    @jax.jit
+    def reference(theta, row):
+        def residual(t):
+            return (simulate_row(t, row, A.v_est, A) - A.y_est) * A.m_est / A.y_scale
+
+        r, J = residual(theta), jax.jacfwd(residual)(theta)
+        return r @ r, J.T @ J, J.T @ r
+
+    on = jnp.asarray(True)
+    for name, row in prep.rows:
+        theta = row.theta0 + 0.2 * jr.normal(getkey(), row.theta0.shape)
+        ref = reference(theta, row)
+        # skipping the memory scan or the table is exact where they are unused
+        for flags in ((on, on), (uses_memory(row.free), jnp.asarray(tabulated))):
+            for got, want in zip(blocked(theta, row, A, *flags), ref, strict=True):
+                scale = float(jnp.max(jnp.abs(want)))
+                assert np.allclose(got, want, rtol=1e-9, atol=1e-9 * scale), name
+    if tabulated:  # and the table is not skipped silently where it is used
+        row = prep.rows[0][1]
+        sse = blocked(row.theta0, row, A, on, on)[0]
+        assert not np.isclose(sse, blocked(row.theta0, row, A, on, ~on)[0])

@@ -204,13 +204,30 @@ def linear_polynomials(p: Float[Array, " S"], case: CaseArrays) -> tuple[Array, 
     return jnp.where(ct, b_ct, g * case.b_disc), jnp.where(ct, c, a_disc)
 
 
-def static_map(v: Array, p: Float[Array, " S"], case: CaseArrays) -> Array:
-    """The nominal static nonlinearity $F$ with re-fitted parameters."""
-    k1, k2, d1, d2, l1, l2, si, so, _ = (p[i] for i in range(len(NOMINAL_SLOTS)))
+def _table(v: Array, p: Float[Array, " S"], case: CaseArrays) -> Array:
+    si, so = p[NOMINAL_SLOTS.index("in_scale")], p[NOMINAL_SLOTS.index("out_scale")]
+    return so * jnp.interp(si * v, case.tab_v, case.tab_u)
+
+
+def static_map(
+    v: Array,
+    p: Float[Array, " S"],
+    case: CaseArrays,
+    table: bool | Bool[Array, ""] = True,
+) -> Array:
+    """The nominal static nonlinearity $F$ with re-fitted parameters.
+
+    `table=False` skips the table look-up (exact unless the map is tabulated); a
+    traced `table` that is the same for a whole batch skips it at run time.
+    """
+    k1, k2, d1, d2, l1, l2 = (p[i] for i in range(6))
     pl = jnp.where(
         v > d1, k1 * (v - d1) + l1, jnp.where(v < d2, k2 * (v - d2) + l2, 0.0)
     )
-    tab = so * jnp.interp(si * v, case.tab_v, case.tab_u)
+    if table is True:
+        tab = _table(v, p, case)
+    else:
+        tab = lax.cond(table, _table, lambda v, *_: jnp.zeros_like(v), v, p, case)
     return jnp.where(
         case.nl_kind == NL_PIECEWISE,
         pl,
@@ -218,23 +235,34 @@ def static_map(v: Array, p: Float[Array, " S"], case: CaseArrays) -> Array:
     )
 
 
-def filter_df2t(b: Array, a: Array, u: Array) -> Array:
-    """`scipy.signal.lfilter(b, a, u)` from rest (direct form II transposed)."""
-    n = a.shape[0] - 1
+def filter_scan(
+    b: Array, a: Array, u: Float[Array, " B"], z: Float[Array, " n"]
+) -> tuple[Float[Array, " n"], Float[Array, " B"]]:
+    """Direct form II transposed from state `z`: `(z_end, w)`; from `z = 0` this is
+    `scipy.signal.lfilter(b, a, u)`, and chaining the state over consecutive
+    blocks of `u` gives the same output as one call on the whole record."""
 
     def step(z, uk):
         yk = b[0] * uk + z[0]
         z = jnp.concatenate([z[1:], jnp.zeros(1, z.dtype)]) + b[1:] * uk - a[1:] * yk
         return z, yk
 
-    _, y = lax.scan(step, jnp.zeros(n, u.dtype), u, unroll=1)
-    return y
+    return lax.scan(step, z, u, unroll=1)
 
 
-def input_memory(
-    v: Float[Array, " L"], max_step: Float[Array, ""], width: Float[Array, ""]
-) -> Float[Array, " L"]:
-    """Rate limit then play operator, both started at $v_0$ (one scan, two clamps)."""
+def filter_df2t(b: Array, a: Array, u: Array) -> Array:
+    """`scipy.signal.lfilter(b, a, u)` from rest (direct form II transposed)."""
+    return filter_scan(b, a, u, jnp.zeros(a.shape[0] - 1, u.dtype))[1]
+
+
+def memory_scan(
+    v: Float[Array, " B"],
+    state: tuple[Array, Array],
+    max_step: Float[Array, ""],
+    width: Float[Array, ""],
+) -> tuple[tuple[Array, Array], Float[Array, " B"]]:
+    """Rate limit then play operator from `state = (rate-limited, play output)`:
+    `(state_end, x)` (one scan, two clamps; chains over blocks like `filter_scan`)."""
 
     def step(carry, vk):
         xr, xb = carry
@@ -242,8 +270,64 @@ def input_memory(
         xb = play_step(xb, xr, width)
         return (xr, xb), xb
 
-    _, x = lax.scan(step, (v[0], v[0]), v, unroll=1)
-    return x
+    return lax.scan(step, state, v, unroll=1)
+
+
+def input_memory(
+    v: Float[Array, " L"], max_step: Float[Array, ""], width: Float[Array, ""]
+) -> Float[Array, " L"]:
+    """Rate limit then play operator, both started at $v_0$."""
+    return memory_scan(v, (v[0], v[0]), max_step, width)[1]
+
+
+def named(p: Float[Array, " S"], case: CaseArrays) -> dict[str, Array]:
+    """The physical parameter vector by slot name."""
+    n_max = case.b_disc.shape[0] - 1
+    return {name: p[i] for i, name in enumerate(slot_names(n_max))}
+
+
+def filter_coefficients(p: Float[Array, " S"], case: CaseArrays) -> tuple[Array, Array]:
+    """`(b, a)` of the whole linear part: the re-fitted block times the extra lag
+    $(1-p)/(1-p q^{-1})$ (linear, so folded into one filter)."""
+    b, a = linear_polynomials(p, case)
+    pole = jnp.clip(named(p, case)["pole"], 0.0, 0.995)
+    b = jnp.convolve(b, jnp.stack([1 - pole, jnp.zeros(())]))
+    a = jnp.convolve(a, jnp.stack([jnp.ones(()), -pole]))
+    return b, a
+
+
+def memory_arguments(p: Float[Array, " S"], case: CaseArrays) -> tuple[Array, Array]:
+    """`(max_step, width)` of the input-memory scan (rate limit per sample, play)."""
+    at = named(p, case)
+    return at["rate"] * case.dt, at["backlash"]
+
+
+def static_part(
+    x: Array,
+    p: Float[Array, " S"],
+    case: CaseArrays,
+    table: bool | Bool[Array, ""] = True,
+) -> Array:
+    """Dead zone, $F$, preload and saturation: the memoryless input side."""
+    at = named(p, case)
+    vd = dead_zone(x, at["dz_lo"], at["dz_hi"])
+    u = add_preload(static_map(vd, p, case, table), vd, at["preload"])
+    return saturate(u, at["sat_lo"], at["sat_hi"])
+
+
+def output_part(w: Array, p: Float[Array, " S"], case: CaseArrays) -> Array:
+    """The output map $h$ (`output_nonlinearity`)."""
+    at = named(p, case)
+    return output_map(
+        w,
+        case.out_centre,
+        case.out_half,
+        at["out_q2"],
+        at["out_q3"],
+        at["out_lo"],
+        at["out_hi"],
+        at["out_db"],
+    )
 
 
 def simulate_augmented(
@@ -259,33 +343,15 @@ def simulate_augmented(
     exact when both are at their neutral values; a traced `memory` that is the same
     for a whole batch (not mapped over) skips it at run time for that batch.
     """
-    n_max = case.b_disc.shape[0] - 1
-    at = {name: p[i] for i, name in enumerate(slot_names(n_max))}
-    b, a = linear_polynomials(p, case)
-    pole = jnp.clip(at["pole"], 0.0, 0.995)
-    # The extra lag (1-p)/(1-p q^-1) is linear: fold it into B/A.
-    b = jnp.convolve(b, jnp.stack([1 - pole, jnp.zeros(())]))
-    a = jnp.convolve(a, jnp.stack([jnp.ones(()), -pole]))
+    b, a = filter_coefficients(p, case)
     v = delay(v, tau)
-    args = (v, at["rate"] * case.dt, at["backlash"])
+    args = (v, *memory_arguments(p, case))
     if memory is True:
         x = input_memory(*args)
     else:
         x = lax.cond(memory, input_memory, lambda v, *_: v, *args)
-    vd = dead_zone(x, at["dz_lo"], at["dz_hi"])
-    u = add_preload(static_map(vd, p, case), vd, at["preload"])
-    u = saturate(u, at["sat_lo"], at["sat_hi"])
-    w = filter_df2t(b, a, u)
-    return output_map(
-        w,
-        case.out_centre,
-        case.out_half,
-        at["out_q2"],
-        at["out_q3"],
-        at["out_lo"],
-        at["out_hi"],
-        at["out_db"],
-    )
+    w = filter_df2t(b, a, static_part(x, p, case))
+    return output_part(w, p, case)
 
 
 def simulate_row(

@@ -9,7 +9,7 @@ import numpy as np
 
 from ..models import Hammerstein
 from .attribute import Attribution, attribute
-from .layout import bucket, n_free_parameters, prepare
+from .layout import bucket, describe_nominal, n_free_parameters, prepare
 from .locate import locate
 from .schedule import batch_size, run_queue
 
@@ -35,10 +35,14 @@ class GapDiagnosis(eqx.Module):
     residual_after: np.ndarray
 
 
+ONE_GROUP = 8192  # records up to this length share one padded length per call
+
+
 def _length_group(n: int) -> int:
-    # coarse groups (powers of two) so a batch of cases compiles only a few times
-    b = bucket(n)
-    return int(2 ** np.ceil(np.log2(b)))
+    # The fits follow each record's own length (`fit.normal_equations`), so cases
+    # up to ONE_GROUP samples share one padded length and one compilation; longer
+    # ones are grouped by powers of two (their padding is memory, not time).
+    return int(2 ** np.ceil(np.log2(bucket(n))))
 
 
 def _result(prep, att: Attribution, val: dict) -> GapDiagnosis:
@@ -104,19 +108,23 @@ def diagnose_many(
     """Diagnose several cases: `(plant, dt, estimation, validation)` each, the records
     being `{"t", "v", "y"}` dicts of NumPy arrays.
 
-    Cases are padded to a few common lengths; per length, their candidate rows go
-    through one compiled batch (`schedule.run_queue`) of the screening rows of
+    Cases are padded to a common length (records over `ONE_GROUP` samples to a
+    few), in order of map kind and length; per length, their candidate rows go through one
+    compiled batch (`schedule.run_queue`) of the screening rows of
     `cases_per_batch` cases, split over the devices. `on_result(i, diagnosis)` is
     called as soon as case `i` is done, so a caller can write each result while the
     others are still being fitted.
     """
+    lengths = [max(est["v"].shape[0], val["v"].shape[0]) for *_, est, val in items]
+    kinds = [describe_nominal(plant).nl_kind for plant, *_ in items]
     groups = defaultdict(list)
-    for i, (_plant, _dt, est, val) in enumerate(items):
-        n = max(est["v"].shape[0], val["v"].shape[0])
-        groups[_length_group(n)].append(i)
+    # Cases alike in a batch (`fit._fit_flat`): by map kind, then by length.
+    for i in sorted(range(len(items)), key=lambda i: (kinds[i], lengths[i])):
+        groups[max(_length_group(lengths[i]), ONE_GROUP)].append(i)
     n_params = max(n_free_parameters(plant) for plant, *_ in items)
     out: list = [None] * len(items)
-    for length, members in groups.items():
+    for members in groups.values():
+        length = max(_length_group(lengths[i]) for i in members)
         preps = [
             prepare(*items[i], length, n_params)  # type: ignore[arg-type]
             for i in members

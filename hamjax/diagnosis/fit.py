@@ -4,6 +4,7 @@ serves every batch of a call; `schedule.py` decides which rows go into a batch."
 
 import equinox as eqx
 import jax
+import jax.lax as lax
 import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, PartitionSpec
@@ -12,18 +13,27 @@ from jaxtyping import Array, Bool, Float, Int
 from .._linalg import cholesky_solve
 from .augmented import (
     EFFECT_SLOTS,
+    NL_TABULATED,
     NOMINAL_SLOTS,
     CaseArrays,
     Row,
+    filter_coefficients,
+    filter_scan,
     full_parameters,
+    memory_arguments,
+    memory_scan,
+    output_part,
     simulate_row,
+    static_part,
     uses_memory,
 )
+from .effects.time_delay import delay
 
 
 LAMBDA0 = 1e-3  # initial Levenberg-Marquardt damping
 PRIOR = 1e-6  # weight of the prior at nominal on the scaled re-fit parameters
 LAMBDA_CONVERGED = 1e-2  # largest damping at which a small decrease is convergence
+BLOCK = 256  # samples per block of `normal_equations`
 
 
 class RowFit(eqx.Module):
@@ -48,28 +58,81 @@ def nominal_mask(row: Row, case: CaseArrays) -> Bool[Array, " P"]:
     )
 
 
-def _residuals(theta, args):
-    row, case, memory = args
-    y = simulate_row(theta, row, case.v_est, case, memory)
-    r = (y - case.y_est) * case.m_est / case.y_scale
-    # A diverging trial step must not poison the Jacobian: a large finite value
-    # makes Levenberg-Marquardt reject the step instead.
-    r = jnp.where(jnp.isfinite(r), r, 1e3)
-    # A weak prior at the nominal parameters (a fit of `theta` with prior std
-    # ~ 1/sqrt(PRIOR) per unit of scaled output noise): where the estimation record
-    # leaves a direction of the re-fit undetermined (the gain against the slopes of
-    # a piecewise-linear map, an unexcited segment), every start then ends at the
-    # same point instead of wherever its path stopped.
-    prior = jnp.sqrt(PRIOR) * jnp.where(nominal_mask(row, case), theta, 0.0)
-    return jnp.concatenate([r, prior])
+def _block_model(p, b, a, state, vb, case, memory, table):
+    """One block of the estimation record through the augmented model, from the
+    scans' `state = (rate-limited input, play output, filter state)`."""
+    xr, xb, z = state
+    max_step, width = memory_arguments(p, case)
+    if memory is True:
+        (xr, xb), x = memory_scan(vb, (xr, xb), max_step, width)
+    else:
+        (xr, xb), x = lax.cond(
+            memory, memory_scan, lambda v, s, *_: (s, v), vb, (xr, xb), max_step, width
+        )
+    z, w = filter_scan(b, a, static_part(x, p, case, table), z)
+    return (xr, xb, z), output_part(w, p, case)
 
 
-def _value_and_jacobian(theta, args):
-    r, J = jax.vmap(
-        lambda t: jax.jvp(lambda th: _residuals(th, args), (theta,), (t,)),
-        out_axes=(None, 1),
-    )(jnp.eye(theta.shape[0], dtype=theta.dtype))
-    return r, J
+def normal_equations(
+    theta: Float[Array, " P"],
+    row: Row,
+    case: CaseArrays,
+    memory: bool | Bool[Array, ""] = True,
+    table: bool | Bool[Array, ""] = True,
+) -> tuple[Float[Array, ""], Float[Array, "P P"], Float[Array, " P"]]:
+    """The record part of the least-squares problem at `theta`: `(r^T r, J^T J,
+    J^T r)` of the scaled output residual `r = (y_model - y) m / y_scale` and its
+    Jacobian `J`.
+
+    Accumulated over blocks of `BLOCK` samples up to the record's own length (the
+    scans carry their state, and their tangents, from block to block), so padding
+    costs nothing and `J` (`[L, P]`) is never stored: the cost follows each
+    record's length while one compiled program serves every length up to `L`.
+    The Jacobian is forward mode, one tangent per entry of `theta`; the
+    parameter-to-coefficient map (matrix exponential included) runs once per
+    call, not per block. A non-finite residual sample counts as `1e3` with a zero
+    Jacobian row, so a diverging trial step is rejected.
+    """
+    P, L = theta.shape[0], case.v_est.shape[0]
+    pad = -L % BLOCK
+    vd = jnp.pad(delay(case.v_est, row.tau), (0, pad), mode="edge")
+    y, m = (jnp.pad(x, (0, pad)) for x in (case.y_est, case.m_est))
+    n_blocks = (jnp.sum(case.m_est).astype(jnp.int32) + BLOCK - 1) // BLOCK
+
+    def coefficients(th):
+        p = full_parameters(th, row, case)
+        return p, filter_coefficients(p, case)
+
+    basis = jnp.eye(P, dtype=theta.dtype)
+    (p, (b, a)), (dp, (db, da)) = jax.vmap(
+        lambda t: jax.jvp(coefficients, (theta,), (t,)), out_axes=(None, 0)
+    )(basis)
+    state0 = (vd[0], vd[0], jnp.zeros(a.shape[0] - 1, theta.dtype))
+
+    def body(carry):
+        k, state, dstate, sse, H, g = carry
+        take = lambda x: lax.dynamic_slice_in_dim(x, k * BLOCK, BLOCK)  # noqa: E731
+        vb, yb, mb = take(vd), take(y), take(m)
+        f = lambda p, b, a, s: _block_model(p, b, a, s, vb, case, memory, table)  # noqa: E731
+        (state, yhat), (dstate, dy) = jax.vmap(
+            lambda *t: jax.jvp(f, (p, b, a, state), t), out_axes=(None, 0)
+        )(dp, db, da, dstate)
+        r = (yhat - yb) * mb / case.y_scale
+        ok = jnp.isfinite(r)
+        r = jnp.where(ok, r, 1e3)
+        J = jnp.where(ok[None], dy * (mb / case.y_scale)[None], 0.0)  # [P, BLOCK]
+        return k + 1, state, dstate, sse + r @ r, H + J @ J.T, g + J @ r
+
+    carry = (
+        jnp.asarray(0, jnp.int32),
+        state0,
+        jax.tree.map(lambda x: jnp.zeros((P, *x.shape), x.dtype), state0),
+        jnp.zeros((), theta.dtype),
+        jnp.zeros((P, P), theta.dtype),
+        jnp.zeros(P, theta.dtype),
+    )
+    _, _, _, sse, H, g = lax.while_loop(lambda c: c[0] < n_blocks, body, carry)
+    return sse, H, g
 
 
 def levenberg_marquardt(theta0, lam0, args, max_steps):
@@ -77,51 +140,64 @@ def levenberg_marquardt(theta0, lam0, args, max_steps):
 
     Hand-rolled rather than `optx.LevenbergMarquardt`: under `vmap` over ~20
     candidate rows the optimistix solver cost 17 s per case (and 80 s to
-    compile) against ~3 s here, for the same damped Gauss-Newton iteration. One
-    call site of the Jacobian keeps the compilation small: each iteration
+    compile) against ~3 s here, for the same damped Gauss-Newton iteration. It
+    works on the normal equations (`normal_equations`) plus a weak prior at the
+    nominal parameters: where the estimation record leaves a direction of the
+    re-fit undetermined (the gain against the slopes of a piecewise-linear map,
+    an unexcited segment), every start then ends at the same point instead of
+    wherever its path stopped (a prior std of ~ 1/sqrt(PRIOR) per unit of scaled
+    output noise on the scaled re-fit parameters).
+
+    One call site of the model keeps the compilation small: each iteration
     evaluates the trial point, accepts it if the cost fell, then proposes the
     next trial from the accepted point. The first iteration accepts `theta0` and
     divides `lam0` by 3, so a fit stopped with damping `lam` continues seamlessly
-    from `lam0 = 3 lam`. Returns `(theta, r, J, converged, lam, steps)`.
+    from `lam0 = 3 lam`. Returns `(theta, sse, JtJ, converged, lam, steps)`, the
+    last three of the record part only (scaled output).
     """
+    row, case, memory, table = args
     P = theta0.shape[0]
-    n = args[1].v_est.shape[0] + P  # record and prior residuals
+    mask = nominal_mask(row, case)
 
     def cond(state):
         return (state[-2] < max_steps) & ~state[-1]
 
     def body(state):
-        theta, trial, r, J, cost, lam, k, _ = state
-        r_n, J_n = _value_and_jacobian(trial, args)
-        cost_n = jnp.sum(r_n**2)
+        theta, trial, sse, H, g, cost, lam, k, _ = state
+        sse_n, H_n, g_n = normal_equations(trial, row, case, memory, table)
+        cost_n = sse_n + PRIOR * jnp.sum(jnp.where(mask, trial, 0.0) ** 2)
         better = cost_n < cost
         # A small decrease counts as convergence only for a nearly undamped step:
         # under heavy damping the step is short, so the decrease is small whatever
         # the distance to the minimum (seen stopping fits halfway along a valley).
         small = ((cost - cost_n) <= 1e-10 * cost_n) & (lam <= LAMBDA_CONVERGED)
-        theta, r, J = jax.tree.map(
-            lambda a, b: jnp.where(better, a, b), (trial, r_n, J_n), (theta, r, J)
+        theta, sse, H, g = jax.tree.map(
+            lambda a, b: jnp.where(better, a, b),
+            (trial, sse_n, H_n, g_n),
+            (theta, sse, H, g),
         )
         cost_new = jnp.where(better, cost_n, cost)
         lam = jnp.where(better, lam / 3, lam * 4)
-        H = J.T @ J
-        d = jnp.diag(H) + 1e-12
-        step = -cholesky_solve(H + lam * jnp.diag(d), J.T @ r)
+        Hp = H + PRIOR * jnp.diag(mask.astype(theta.dtype))
+        gp = g + PRIOR * jnp.where(mask, theta, 0.0)
+        d = jnp.diag(Hp) + 1e-12
+        step = -cholesky_solve(Hp + lam * jnp.diag(d), gp)
         done = (better & small) | (lam > 1e10) | (jnp.max(jnp.abs(step)) < 1e-12)
-        return theta, theta + step, r, J, cost_new, lam, k + 1, done
+        return theta, theta + step, sse, H, g, cost_new, lam, k + 1, done
 
     state = (
         theta0,
         theta0,
-        jnp.zeros(n),
-        jnp.zeros((n, P)),
+        jnp.zeros((), theta0.dtype),
+        jnp.zeros((P, P), theta0.dtype),
+        jnp.zeros(P, theta0.dtype),
         jnp.asarray(jnp.inf),
         jnp.asarray(lam0, dtype=theta0.dtype),
         jnp.asarray(0, dtype=jnp.int32),
         jnp.asarray(False),
     )
-    theta, _, r, J, _, lam, k, done = jax.lax.while_loop(cond, body, state)
-    return theta, r, J, done, lam, k
+    theta, _, sse, H, _, _, lam, k, done = jax.lax.while_loop(cond, body, state)
+    return theta, sse, H, done, lam, k
 
 
 def fit_row(
@@ -130,31 +206,30 @@ def fit_row(
     max_steps=30,
     lam0: float | Array = LAMBDA0,
     memory: bool | Bool[Array, ""] = True,
+    table: bool | Bool[Array, ""] = True,
 ) -> RowFit:
     """Fit one row from `row.theta0` (the nominal slots start at nominal).
-    `memory`: as in `simulate_augmented` (False only if the row frees neither
-    the rate limit nor the backlash)."""
-    theta, r, J, done, lam, k = levenberg_marquardt(
-        row.theta0, lam0, (row, case, memory), max_steps
+    `memory`, `table`: as in `simulate_augmented` and `static_map` (False only if
+    the row frees neither the rate limit nor the backlash, and if the case's map
+    is not tabulated)."""
+    theta, sse, jtj, done, lam, k = levenberg_marquardt(
+        row.theta0, lam0, (row, case, memory, table), max_steps
     )
-    L = case.v_est.shape[0]
-    r, J = r[:L], J[:L]  # the record's part (the prior's is not data)
-    sse = jnp.sum(r**2) * case.y_scale**2
     n = jnp.sum(case.m_est)
     used = row.idx < case.anchor.shape[0]
     dof = jnp.maximum(n - jnp.sum(used), 1.0)
     y_val = simulate_row(theta, row, case.v_val, case, memory)
-    bad = ~jnp.isfinite(sse)
+    sse_est = sse * case.y_scale**2
     return RowFit(
         theta=theta,
         params=full_parameters(theta, row, case),
-        sse_est=jnp.where(bad, jnp.inf, sse),
+        sse_est=jnp.where(jnp.isfinite(sse_est), sse_est, jnp.inf),
         y_val=y_val,
         result=jnp.where(done, 0, 1),
         steps=k,
         lam=lam,
-        jtj=J.T @ J,
-        s2=jnp.sum(r**2) / dof,
+        jtj=jtj,
+        s2=sse / dof,
     )
 
 
@@ -185,11 +260,14 @@ def fit_rows(rows: Row, case: CaseArrays, max_steps=30) -> RowFit:
 
 
 def _fit_flat(rows: Row, cases: CaseArrays, max_steps, lam0) -> RowFit:
-    # One flag for the whole (per-device) batch, not mapped over: a batch in which
-    # no row frees the rate limit or the backlash skips the input-memory scan
-    # (measured -8 % per screening batch); `schedule` queues those rows together.
+    # Flags for the whole (per-device) batch, not mapped over: a batch in which no
+    # row frees the rate limit or the backlash skips the input-memory scan
+    # (measured -8 % per screening batch), one without a tabulated map skips the
+    # table look-up (-28 %); `schedule` and `diagnose_many` order the rows so
+    # that most batches are alike.
     memory = jnp.any(uses_memory(rows.free))
-    fit = lambda r, c, k, lam: fit_row(r, c, k, lam, memory)  # noqa: E731
+    table = jnp.any(cases.nl_kind == NL_TABULATED)
+    fit = lambda r, c, k, lam: fit_row(r, c, k, lam, memory, table)  # noqa: E731
     return jax.vmap(fit)(rows, cases, max_steps, lam0)
 
 

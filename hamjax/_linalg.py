@@ -1,5 +1,6 @@
 """Small dense linear algebra in plain `jax.numpy` (no LAPACK custom calls)."""
 
+import jax.lax as lax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
@@ -7,7 +8,7 @@ from jaxtyping import Array, Float
 def cholesky_solve(
     A: Float[Array, " n n"], b: Float[Array, " n *k"]
 ) -> Float[Array, " n *k"]:
-    """Solve $A x = b$ for a symmetric positive-definite `A` by an unrolled Cholesky
+    """Solve $A x = b$ for a symmetric positive-definite `A` by a Cholesky
     factorisation and two triangular sweeps.
 
     For the small systems of a damped Gauss-Newton step (n <= ~20). Written with
@@ -17,15 +18,23 @@ def cholesky_solve(
     positive definite gives NaN, never a silent wrong answer.
     """
     n = A.shape[0]
-    L = jnp.zeros_like(A)
-    for j in range(n):
-        col = A[j:, j] - L[j:, :j] @ L[j, :j]
-        L = L.at[j:, j].set(col / jnp.sqrt(col[0]))
+    idx = jnp.arange(n)
+
+    def column(j, L):  # columns >= j of L are still zero
+        c = A[:, j] - L @ L[j]
+        return L.at[:, j].set(jnp.where(idx >= j, c / jnp.sqrt(c[j]), 0.0))
+
+    # Loops, not unrolled: the same arithmetic in a fraction of the compiled program.
+    L = lax.fori_loop(0, n, column, jnp.zeros_like(A))
     x = b[:, None] if b.ndim == 1 else b
-    y = jnp.zeros_like(x)
-    for i in range(n):
-        y = y.at[i].set((x[i] - L[i, :i] @ y[:i]) / L[i, i])
-    z = jnp.zeros_like(x)
-    for i in reversed(range(n)):
-        z = z.at[i].set((y[i] - L[i + 1 :, i] @ z[i + 1 :]) / L[i, i])
+
+    def forward(i, y):  # rows >= i of y are still zero
+        return y.at[i].set((x[i] - L[i] @ y) / L[i, i])
+
+    def backward(k, z):  # rows <= i of z are still zero
+        i = n - 1 - k
+        return z.at[i].set((y[i] - L[:, i] @ z) / L[i, i])
+
+    y = lax.fori_loop(0, n, forward, jnp.zeros_like(x))
+    z = lax.fori_loop(0, n, backward, jnp.zeros_like(x))
     return z[:, 0] if b.ndim == 1 else z

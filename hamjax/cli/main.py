@@ -27,7 +27,11 @@ class _Parser(argparse.ArgumentParser):
         raise SystemExit(2)
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
+    """The parser; with `argv`, a command module that defines `register_brief`
+    (an entry without its costly details, e.g. every study's options) gets only
+    that when another command is run."""
+    chosen = next((a for a in (argv or []) if not a.startswith("-")), None)
     parser = _Parser(
         prog="hamjax",
         description="Identify Hammerstein systems with hard input nonlinearities "
@@ -35,14 +39,15 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     sub.required = True
-    for module in _COMMANDS.values():
+    for name, module in _COMMANDS.items():
         try:
             mod = importlib.import_module(module)
         except ModuleNotFoundError as err:
             if err.name == module:
                 continue  # not built yet
             raise
-        mod.register(sub)
+        brief = chosen not in (None, name) and hasattr(mod, "register_brief")
+        (mod.register_brief if brief else mod.register)(sub)
     return parser
 
 
@@ -55,7 +60,8 @@ def main(argv: list[str] | None = None) -> int:
     avoid_eigen_pool_hang()
     enable_x64()
     use_compilation_cache()
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else argv
+    parser = build_parser(argv)
     args = parser.parse_args(argv)
     try:
         result = args.func(args)

@@ -8,12 +8,21 @@ from .._errors import UserInputError
 from ._common import positive_int
 
 
+_HELP = "run a registered Monte Carlo study (--list shows them)"
+
+
+def register_brief(sub) -> None:
+    """The `study` entry alone, for runs of another command: finding the studies
+    imports every study module (half a second)."""
+    sub.add_parser("study", help=_HELP)
+
+
 def register(sub) -> None:
     from ..montecarlo.registry import discover_studies
 
     parser = sub.add_parser(
         "study",
-        help="run a registered Monte Carlo study (--list shows them)",
+        help=_HELP,
         description="Run a registered Monte Carlo study. Results go to --out "
         "chunk by chunk; running again with the same --out resumes.",
     )

@@ -16,6 +16,8 @@ $(s + \\lambda)^{n_{max} - n}$ (an exactly cancelling factor) and discretised by
 the zero-order hold, so its denominator coefficients stay the free parameters.
 """
 
+from collections.abc import Callable
+
 import equinox as eqx
 import jax
 import jax.lax as lax
@@ -169,14 +171,19 @@ def _charpoly_adjugate(A: Array) -> tuple[Array, Array]:
     $M_k$ with $\\mathrm{adj}(zI - A) = \\sum_k M_k z^{n-k}$ (products only, so it
     differentiates cleanly)."""
     n = A.shape[0]
-    c = [jnp.ones(())]
-    M = jnp.zeros_like(A)
-    Ms = []
-    for k in range(1, n + 1):
-        M = A @ M + c[-1] * jnp.eye(n)
-        Ms.append(M)
-        c.append(-jnp.trace(A @ M) / k)
-    return jnp.stack(c), jnp.stack(Ms)
+    eye = jnp.eye(n, dtype=A.dtype)
+
+    def step(k, carry):  # k = 1..n
+        M, c, Ms = carry
+        M = A @ M + c[k - 1] * eye
+        c = c.at[k].set(-jnp.trace(A @ M) / k.astype(A.dtype))
+        return M, c, Ms.at[k - 1].set(M)
+
+    c0 = jnp.zeros(n + 1, A.dtype).at[0].set(1.0)
+    _, c, Ms = lax.fori_loop(
+        1, n + 1, step, (jnp.zeros_like(A), c0, jnp.zeros((n, n, n), A.dtype))
+    )
+    return c, Ms
 
 
 def linear_polynomials(p: Float[Array, " S"], case: CaseArrays) -> tuple[Array, Array]:
@@ -280,17 +287,17 @@ def input_memory(
     return memory_scan(v, (v[0], v[0]), max_step, width)[1]
 
 
-def named(p: Float[Array, " S"], case: CaseArrays) -> dict[str, Array]:
-    """The physical parameter vector by slot name."""
+def named(p: Float[Array, " S"], case: CaseArrays) -> Callable[[str], Array]:
+    """`at(name)`: the physical value of slot `name` (one index, taken on use)."""
     n_max = case.b_disc.shape[0] - 1
-    return {name: p[i] for i, name in enumerate(slot_names(n_max))}
+    return lambda name: p[slot_index(name, n_max)]
 
 
 def filter_coefficients(p: Float[Array, " S"], case: CaseArrays) -> tuple[Array, Array]:
     """`(b, a)` of the whole linear part: the re-fitted block times the extra lag
     $(1-p)/(1-p q^{-1})$ (linear, so folded into one filter)."""
     b, a = linear_polynomials(p, case)
-    pole = jnp.clip(named(p, case)["pole"], 0.0, 0.995)
+    pole = jnp.clip(named(p, case)("pole"), 0.0, 0.995)
     b = jnp.convolve(b, jnp.stack([1 - pole, jnp.zeros(())]))
     a = jnp.convolve(a, jnp.stack([jnp.ones(()), -pole]))
     return b, a
@@ -299,7 +306,7 @@ def filter_coefficients(p: Float[Array, " S"], case: CaseArrays) -> tuple[Array,
 def memory_arguments(p: Float[Array, " S"], case: CaseArrays) -> tuple[Array, Array]:
     """`(max_step, width)` of the input-memory scan (rate limit per sample, play)."""
     at = named(p, case)
-    return at["rate"] * case.dt, at["backlash"]
+    return at("rate") * case.dt, at("backlash")
 
 
 def static_part(
@@ -310,9 +317,9 @@ def static_part(
 ) -> Array:
     """Dead zone, $F$, preload and saturation: the memoryless input side."""
     at = named(p, case)
-    vd = dead_zone(x, at["dz_lo"], at["dz_hi"])
-    u = add_preload(static_map(vd, p, case, table), vd, at["preload"])
-    return saturate(u, at["sat_lo"], at["sat_hi"])
+    vd = dead_zone(x, at("dz_lo"), at("dz_hi"))
+    u = add_preload(static_map(vd, p, case, table), vd, at("preload"))
+    return saturate(u, at("sat_lo"), at("sat_hi"))
 
 
 def output_part(w: Array, p: Float[Array, " S"], case: CaseArrays) -> Array:
@@ -322,11 +329,11 @@ def output_part(w: Array, p: Float[Array, " S"], case: CaseArrays) -> Array:
         w,
         case.out_centre,
         case.out_half,
-        at["out_q2"],
-        at["out_q3"],
-        at["out_lo"],
-        at["out_hi"],
-        at["out_db"],
+        at("out_q2"),
+        at("out_q3"),
+        at("out_lo"),
+        at("out_hi"),
+        at("out_db"),
     )
 
 
@@ -344,13 +351,28 @@ def simulate_augmented(
     for a whole batch (not mapped over) skips it at run time for that batch.
     """
     b, a = filter_coefficients(p, case)
+    return simulate_with_filter(p, b, a, tau, v, case, memory)
+
+
+def simulate_with_filter(
+    p: Float[Array, " S"],
+    b: Array,
+    a: Array,
+    tau: Int[Array, ""],
+    v: Float[Array, " L"],
+    case: CaseArrays,
+    memory: bool | Bool[Array, ""] = True,
+    table: bool | Bool[Array, ""] = True,
+) -> Float[Array, " L"]:
+    """`simulate_augmented` with the filter `(b, a) = filter_coefficients(p, case)`
+    already at hand (a fit has it; the matrix exponential is not repeated)."""
     v = delay(v, tau)
     args = (v, *memory_arguments(p, case))
     if memory is True:
         x = input_memory(*args)
     else:
         x = lax.cond(memory, input_memory, lambda v, *_: v, *args)
-    w = filter_df2t(b, a, static_part(x, p, case))
+    w = filter_df2t(b, a, static_part(x, p, case, table))
     return output_part(w, p, case)
 
 

@@ -11,6 +11,7 @@ from ..models import Hammerstein
 from .attribute import Attribution, attribute
 from .layout import bucket, describe_nominal, n_free_parameters, prepare
 from .locate import locate
+from .noise_fit import compile_in_background
 from .schedule import batch_size, run_queue
 
 
@@ -122,6 +123,12 @@ def diagnose_many(
     for i in sorted(range(len(items)), key=lambda i: (kinds[i], lengths[i])):
         groups[max(_length_group(lengths[i]), ONE_GROUP)].append(i)
     n_params = max(n_free_parameters(plant) for plant, *_ in items)
+    noise_compile: list = []  # the noise models compile while the fits do
+
+    def overlap() -> None:
+        if not noise_compile:
+            noise_compile.append(compile_in_background(lengths))
+
     out: list = [None] * len(items)
     for members in groups.values():
         length = max(_length_group(lengths[i]) for i in members)
@@ -136,7 +143,7 @@ def diagnose_many(
             if on_result is not None:
                 on_result(i, out[i])
 
-        run_queue(preps, batch_size(preps, cases_per_batch), finished)
+        run_queue(preps, batch_size(preps, cases_per_batch), finished, overlap)
     return out
 
 

@@ -2,6 +2,8 @@
 batched over a flat list of rows (each with its own case) so that one compilation
 serves every batch of a call; `schedule.py` decides which rows go into a batch."""
 
+from collections.abc import Callable
+
 import equinox as eqx
 import jax
 import jax.lax as lax
@@ -23,7 +25,7 @@ from .augmented import (
     memory_arguments,
     memory_scan,
     output_part,
-    simulate_row,
+    simulate_with_filter,
     static_part,
     uses_memory,
 )
@@ -73,6 +75,11 @@ def _block_model(p, b, a, state, vb, case, memory, table):
     return (xr, xb, z), output_part(w, p, case)
 
 
+def _coefficients(theta, row, case):
+    p = full_parameters(theta, row, case)
+    return (p, *filter_coefficients(p, case))
+
+
 def normal_equations(
     theta: Float[Array, " P"],
     row: Row,
@@ -93,19 +100,27 @@ def normal_equations(
     call, not per block. A non-finite residual sample counts as `1e3` with a zero
     Jacobian row, so a diverging trial step is rejected.
     """
+    return _normal_equations(theta, row, case, memory, table)[0]
+
+
+def _normal_equations(
+    theta: Float[Array, " P"],
+    row: Row,
+    case: CaseArrays,
+    memory: bool | Bool[Array, ""] = True,
+    table: bool | Bool[Array, ""] = True,
+):
+    """`normal_equations`, and the physical parameters and filter at `theta`."""
     P, L = theta.shape[0], case.v_est.shape[0]
     pad = -L % BLOCK
     vd = jnp.pad(delay(case.v_est, row.tau), (0, pad), mode="edge")
     y, m = (jnp.pad(x, (0, pad)) for x in (case.y_est, case.m_est))
     n_blocks = (jnp.sum(case.m_est).astype(jnp.int32) + BLOCK - 1) // BLOCK
 
-    def coefficients(th):
-        p = full_parameters(th, row, case)
-        return p, filter_coefficients(p, case)
-
     basis = jnp.eye(P, dtype=theta.dtype)
-    (p, (b, a)), (dp, (db, da)) = jax.vmap(
-        lambda t: jax.jvp(coefficients, (theta,), (t,)), out_axes=(None, 0)
+    (p, b, a), (dp, db, da) = jax.vmap(
+        lambda t: jax.jvp(lambda th: _coefficients(th, row, case), (theta,), (t,)),
+        out_axes=(None, 0),
     )(basis)
     state0 = (vd[0], vd[0], jnp.zeros(a.shape[0] - 1, theta.dtype))
 
@@ -132,7 +147,7 @@ def normal_equations(
         jnp.zeros(P, theta.dtype),
     )
     _, _, _, sse, H, g = lax.while_loop(lambda c: c[0] < n_blocks, body, carry)
-    return sse, H, g
+    return (sse, H, g), (p, b, a)
 
 
 def levenberg_marquardt(theta0, lam0, args, max_steps):
@@ -163,18 +178,18 @@ def levenberg_marquardt(theta0, lam0, args, max_steps):
         return (state[-2] < max_steps) & ~state[-1]
 
     def body(state):
-        theta, trial, sse, H, g, cost, lam, k, _ = state
-        sse_n, H_n, g_n = normal_equations(trial, row, case, memory, table)
+        theta, trial, sse, H, g, coef, cost, lam, k, _ = state
+        (sse_n, H_n, g_n), coef_n = _normal_equations(trial, row, case, memory, table)
         cost_n = sse_n + PRIOR * jnp.sum(jnp.where(mask, trial, 0.0) ** 2)
         better = cost_n < cost
         # A small decrease counts as convergence only for a nearly undamped step:
         # under heavy damping the step is short, so the decrease is small whatever
         # the distance to the minimum (seen stopping fits halfway along a valley).
         small = ((cost - cost_n) <= 1e-10 * cost_n) & (lam <= LAMBDA_CONVERGED)
-        theta, sse, H, g = jax.tree.map(
+        theta, sse, H, g, coef = jax.tree.map(
             lambda a, b: jnp.where(better, a, b),
-            (trial, sse_n, H_n, g_n),
-            (theta, sse, H, g),
+            (trial, sse_n, H_n, g_n, coef_n),
+            (theta, sse, H, g, coef),
         )
         cost_new = jnp.where(better, cost_n, cost)
         lam = jnp.where(better, lam / 3, lam * 4)
@@ -183,7 +198,7 @@ def levenberg_marquardt(theta0, lam0, args, max_steps):
         d = jnp.diag(Hp) + 1e-12
         step = -cholesky_solve(Hp + lam * jnp.diag(d), gp)
         done = (better & small) | (lam > 1e10) | (jnp.max(jnp.abs(step)) < 1e-12)
-        return theta, theta + step, sse, H, g, cost_new, lam, k + 1, done
+        return theta, theta + step, sse, H, g, coef, cost_new, lam, k + 1, done
 
     state = (
         theta0,
@@ -191,13 +206,18 @@ def levenberg_marquardt(theta0, lam0, args, max_steps):
         jnp.zeros((), theta0.dtype),
         jnp.zeros((P, P), theta0.dtype),
         jnp.zeros(P, theta0.dtype),
+        (  # p, b, a (the extra lag adds one coefficient to each)
+            jnp.zeros(case.anchor.shape[0], theta0.dtype),
+            jnp.zeros(case.b_disc.shape[0] + 1, theta0.dtype),
+            jnp.zeros(case.b_disc.shape[0] + 1, theta0.dtype),
+        ),
         jnp.asarray(jnp.inf),
         jnp.asarray(lam0, dtype=theta0.dtype),
         jnp.asarray(0, dtype=jnp.int32),
         jnp.asarray(False),
     )
-    theta, _, sse, H, _, _, lam, k, done = jax.lax.while_loop(cond, body, state)
-    return theta, sse, H, done, lam, k
+    theta, _, sse, H, _, coef, _, lam, k, done = lax.while_loop(cond, body, state)
+    return theta, sse, H, coef, done, lam, k
 
 
 def fit_row(
@@ -212,17 +232,17 @@ def fit_row(
     `memory`, `table`: as in `simulate_augmented` and `static_map` (False only if
     the row frees neither the rate limit nor the backlash, and if the case's map
     is not tabulated)."""
-    theta, sse, jtj, done, lam, k = levenberg_marquardt(
+    theta, sse, jtj, (p, b, a), done, lam, k = levenberg_marquardt(
         row.theta0, lam0, (row, case, memory, table), max_steps
     )
     n = jnp.sum(case.m_est)
     used = row.idx < case.anchor.shape[0]
     dof = jnp.maximum(n - jnp.sum(used), 1.0)
-    y_val = simulate_row(theta, row, case.v_val, case, memory)
+    y_val = simulate_with_filter(p, b, a, row.tau, case.v_val, case, memory, table)
     sse_est = sse * case.y_scale**2
     return RowFit(
         theta=theta,
-        params=full_parameters(theta, row, case),
+        params=p,
         sse_est=jnp.where(jnp.isfinite(sse_est), sse_est, jnp.inf),
         y_val=y_val,
         result=jnp.where(done, 0, 1),
@@ -271,12 +291,6 @@ def _fit_flat(rows: Row, cases: CaseArrays, max_steps, lam0) -> RowFit:
     return jax.vmap(fit)(rows, cases, max_steps, lam0)
 
 
-@eqx.filter_jit
-def _fit_flat_jit(rows, cases, max_steps, lam0):
-    return _fit_flat(rows, cases, max_steps, lam0)
-
-
-@eqx.filter_jit
 def _fit_flat_sharded(rows, cases, max_steps, lam0):
     mesh = Mesh(np.asarray(jax.devices()), ("d",))
     spec = PartitionSpec("d")
@@ -292,11 +306,30 @@ def _fit_flat_sharded(rows, cases, max_steps, lam0):
     return fn(rows, cases, max_steps, lam0)
 
 
+_PROGRAMS = {"one": jax.jit(_fit_flat), "sharded": jax.jit(_fit_flat_sharded)}
+_EXECUTABLES: dict = {}
+
+
+def _executable(kind: str, args: tuple, while_compiling: Callable[[], None] | None):
+    """The compiled fit program for these argument shapes, traced and compiled
+    ahead of time so that `while_compiling` runs between the two: XLA releases the
+    GIL while it compiles, tracing does not."""
+    leaves, tree = jax.tree.flatten(args)
+    key = (kind, tree, tuple((np.shape(x), np.dtype(x.dtype)) for x in leaves))
+    if key not in _EXECUTABLES:
+        lowered = _PROGRAMS[kind].lower(*args)
+        if while_compiling is not None:
+            while_compiling()
+        _EXECUTABLES[key] = lowered.compile()
+    return _EXECUTABLES[key]
+
+
 def fit_batch(
     rows: Row,
     cases: CaseArrays,
     max_steps: Int[np.ndarray, " N"],
     lam0: Float[np.ndarray, " N"],
+    while_compiling: Callable[[], None] | None = None,
 ) -> RowFit:
     """Fit `N` rows, row `i` on case `i` (both stacked along axis 0), each with its
     own step budget and initial damping.
@@ -305,11 +338,15 @@ def fit_batch(
     on a 2-core CPU, as `hamjax diagnose` sets) and `N` a multiple of their number,
     the rows are split over them; the split changes only rounding. Budgets and
     dampings are traced, so changing them does not recompile; the cost of a batch is
-    that of its longest-running row.
+    that of its longest-running row. `while_compiling` is called once the program
+    for these shapes is traced, if it has to be compiled (work to overlap with it).
     """
-    steps = jnp.asarray(max_steps, dtype=jnp.int32)
-    lam0 = jnp.asarray(lam0, dtype=float)
+    args = (
+        rows,
+        cases,
+        np.asarray(max_steps, dtype=np.int32),
+        np.asarray(lam0, dtype=float),
+    )
     n_dev = jax.device_count()
-    if n_dev > 1 and rows.theta0.shape[0] % n_dev == 0:
-        return _fit_flat_sharded(rows, cases, steps, lam0)
-    return _fit_flat_jit(rows, cases, steps, lam0)
+    sharded = n_dev > 1 and rows.theta0.shape[0] % n_dev == 0
+    return _executable("sharded" if sharded else "one", args, while_compiling)(*args)

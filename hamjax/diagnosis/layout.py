@@ -3,7 +3,6 @@ model, and the candidate catalogue into rows (NumPy; runs once per case)."""
 
 from dataclasses import dataclass
 
-import jax.numpy as jnp
 import numpy as np
 import scipy.linalg
 
@@ -293,10 +292,10 @@ def prepare(
                     (
                         effect.name,
                         Row(
-                            idx=jnp.asarray(idx),
-                            theta0=jnp.asarray(theta0),
-                            tau=jnp.asarray(tau),
-                            free=jnp.asarray(free),
+                            idx=np.asarray(idx),
+                            theta0=np.asarray(theta0),
+                            tau=np.asarray(tau),
+                            free=np.asarray(free),
                         ),
                     )
                 )
@@ -305,7 +304,8 @@ def prepare(
     y_est, _ = _pad_record(est["y"], L)
     v_val, m_val = _pad_record(val["v"], L)
     y_val, _ = _pad_record(val["y"], L)
-    f = lambda x: jnp.asarray(x, dtype=float)
+    # NumPy on the host: the fits stack and gather these without eager JAX ops
+    f = lambda x: np.asarray(x, dtype=float)
     arrays = CaseArrays(
         v_est=f(v_est),
         y_est=f(y_est),
@@ -315,7 +315,7 @@ def prepare(
         m_val=f(m_val),
         dt=f(dt),
         is_ct=f(1.0 if nom.is_ct else 0.0),
-        nl_kind=jnp.asarray(nom.nl_kind),
+        nl_kind=np.asarray(nom.nl_kind),
         tab_v=f(tab_v),
         tab_u=f(tab_u),
         b_disc=f(b_disc),

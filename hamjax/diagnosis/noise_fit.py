@@ -1,6 +1,9 @@
 """Fit the two noise-model effects (`drift`, `coloured_noise`) on the estimation
 residual and score them by one-step-ahead prediction on the validation residual."""
 
+import threading
+from collections.abc import Iterable
+
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
@@ -53,3 +56,23 @@ def noise_fit_numpy(r_est: np.ndarray, r_val: np.ndarray) -> dict:
         "coloured_noise": (float(f.ar1_pole), np.asarray(f.ar1_errors)[:k]),
         "drift": (float(f.level_alpha), np.asarray(f.level_errors)[:k]),
     }
+
+
+def compile_in_background(lengths: Iterable[int]) -> threading.Thread:
+    """Compile `fit_noise_models` for the records of these lengths on a thread.
+
+    The candidate fits compile meanwhile (XLA releases the GIL while compiling), so
+    the noise models, needed once the first case is fitted, are ready by then.
+    """
+
+    def run() -> None:
+        for n in sorted({bucket(k) for k in lengths}):
+            z = jnp.zeros(n)
+            try:
+                fit_noise_models(z, z, z)
+            except Exception:  # noqa: BLE001 - a real call raises it where it matters
+                return
+
+    thread = threading.Thread(target=run, name="hamjax-noise-compile", daemon=True)
+    thread.start()
+    return thread

@@ -135,10 +135,12 @@ def run_queue(
     preps: list[Prepared],
     batch: int,
     on_case: Callable[[int, dict], None],
+    while_compiling: Callable[[], None] | None = None,
 ) -> None:
     """Fit every row of every case (all with the same padded record length) and call
     `on_case(c, fits)` as soon as case `c` is finished, `fits` being its rows'
-    `RowFit` fields (NumPy, leading axis row) plus `theta_std`."""
+    `RowFit` fields (NumPy, leading axis row) plus `theta_std`. `while_compiling`:
+    as in `fit.fit_batch`."""
     queues: dict[str, deque] = {s: deque() for s in ("screen", "finish", "more")}
     fits: list[dict | None] = [None] * len(preps)
     outstanding = [len(p.rows) for p in preps]
@@ -207,13 +209,18 @@ def run_queue(
             FIRST_PASS if it.stage == "finish" and not flush else it.budget
             for it in take
         ]
-        out = run_batch(take, budgets, rows, arrays, batch)
+        out = run_batch(take, budgets, rows, arrays, batch, while_compiling)
         for j, it in enumerate(take):
             done(it, {name: x[j] for name, x in out.items()})
 
 
 def run_batch(
-    take: list[Item], budgets: list[int], rows: list[Row], arrays, batch: int
+    take: list[Item],
+    budgets: list[int],
+    rows: list[Row],
+    arrays,
+    batch: int,
+    while_compiling: Callable[[], None] | None = None,
 ) -> dict:
     """One batch: the items' rows and cases gathered on the host, padded to `batch`
     with copies of the first item at a zero budget."""
@@ -235,6 +242,7 @@ def run_batch(
             cases,
             np.asarray(budgets + [0] * pad, dtype=np.int32),
             np.asarray([it.lam0 for it in items]),
+            while_compiling,
         )
     )
     return {name: np.asarray(getattr(fit, name)) for name in FIELDS}

@@ -12,7 +12,7 @@ MAX_DELAY = 8  # samples tried (one vmapped row each); the neutral delay is 0
 def delay(v: Float[Array, " time"], tau: Int[Array, ""]) -> Float[Array, " time"]:
     """$v_{k-\\tau}$, holding $v_0$ before $t = 0$ (the contract); $\\tau = 0$ is neutral."""
     idx = jnp.maximum(jnp.arange(v.shape[0]) - tau, 0)
-    return v[idx]
+    return jnp.asarray(v)[idx]
 
 
 class TimeDelayEffect(AbstractEffect):

@@ -13,7 +13,7 @@ import pytest
 from helpers import run_on_two_devices
 
 import hamjax.diagnosis.schedule as schedule
-from hamjax.diagnosis.augmented import slot_index, uses_memory
+from hamjax.diagnosis.augmented import NL_TABULATED, slot_index, uses_memory
 from hamjax.diagnosis.fit import LAMBDA0, fit_batch, theta_std
 from hamjax.diagnosis.layout import N_MAX, prepare
 from hamjax.diagnosis.schedule import (
@@ -276,3 +276,27 @@ def test_numpy_nominal_response_matches_scipy():
             strict=True,
         ):
             np.testing.assert_allclose(mine, ref, atol=1e-14)
+
+
+@pytest.mark.slow
+def test_static_flags_give_the_run_time_decision():
+    # A call that knows what all its batches need compiles a smaller program:
+    # `table=False` leaves the table look-up out (exact for a map that is not
+    # tabulated), `memory=True` always runs the input-memory scan (the identity for
+    # rows that free neither the rate limit nor the backlash). Same rows, same
+    # places: equal to rounding to the run-time decision (default, None).
+    prep = prepare(*tiny_case(jr.key(6), "backlash", noise=1e-3))
+    assert prep.nominal.nl_kind != NL_TABULATED
+    n = len(prep.rows)
+    rows = _stack([r for _, r in prep.rows])
+    cases = _stack([prep.arrays] * n)
+
+    def sse(**flags):
+        fit = fit_batch(rows, cases, np.full(n, 15), np.full(n, LAMBDA0), **flags)
+        return np.asarray(fit.sse_est)
+
+    default = sse()
+    np.testing.assert_allclose(sse(memory=True, table=False), default, rtol=1e-9)
+    # and the flags are not ignored: without the scan the backlash row cannot fit
+    k = [name for name, _ in prep.rows].index("backlash")
+    assert sse(memory=False)[k] > 10 * default[k]

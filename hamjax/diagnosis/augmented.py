@@ -233,6 +233,8 @@ def static_map(
     )
     if table is True:
         tab = _table(v, p, case)
+    elif table is False:
+        tab = jnp.zeros_like(v)
     else:
         tab = lax.cond(table, _table, lambda v, *_: jnp.zeros_like(v), v, p, case)
     return jnp.where(
@@ -370,6 +372,8 @@ def simulate_with_filter(
     args = (v, *memory_arguments(p, case))
     if memory is True:
         x = input_memory(*args)
+    elif memory is False:
+        x = v
     else:
         x = lax.cond(memory, input_memory, lambda v, *_: v, *args)
     w = filter_df2t(b, a, static_part(x, p, case, table))

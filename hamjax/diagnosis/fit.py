@@ -2,6 +2,7 @@
 batched over a flat list of rows (each with its own case) so that one compilation
 serves every batch of a call; `schedule.py` decides which rows go into a batch."""
 
+import functools as ft
 from collections.abc import Callable
 
 import equinox as eqx
@@ -67,6 +68,8 @@ def _block_model(p, b, a, state, vb, case, memory, table):
     max_step, width = memory_arguments(p, case)
     if memory is True:
         (xr, xb), x = memory_scan(vb, (xr, xb), max_step, width)
+    elif memory is False:
+        x = vb
     else:
         (xr, xb), x = lax.cond(
             memory, memory_scan, lambda v, s, *_: (s, v), vb, (xr, xb), max_step, width
@@ -279,25 +282,31 @@ def fit_rows(rows: Row, case: CaseArrays, max_steps=30) -> RowFit:
     return jax.vmap(lambda r: fit_row(r, case, max_steps))(rows)
 
 
-def _fit_flat(rows: Row, cases: CaseArrays, max_steps, lam0) -> RowFit:
-    # Flags for the whole (per-device) batch, not mapped over: a batch in which no
-    # row frees the rate limit or the backlash skips the input-memory scan
+def _fit_flat(
+    rows: Row, cases: CaseArrays, max_steps, lam0, memory=None, table=None
+) -> RowFit:
+    # `memory`, `table`: True or False for a whole call (static: the other branch
+    # is not even compiled, -20 % of the program), or None to decide per
+    # (per-device) batch at run time, a flag not mapped over: a batch in which
+    # no row frees the rate limit or the backlash skips the input-memory scan
     # (measured -8 % per screening batch), one without a tabulated map skips the
     # table look-up (-28 %); `schedule` and `diagnose_many` order the rows so
     # that most batches are alike.
-    memory = jnp.any(uses_memory(rows.free))
-    table = jnp.any(cases.nl_kind == NL_TABULATED)
+    if memory is None:
+        memory = jnp.any(uses_memory(rows.free))
+    if table is None:
+        table = jnp.any(cases.nl_kind == NL_TABULATED)
     fit = lambda r, c, k, lam: fit_row(r, c, k, lam, memory, table)  # noqa: E731
     return jax.vmap(fit)(rows, cases, max_steps, lam0)
 
 
-def _fit_flat_sharded(rows, cases, max_steps, lam0):
+def _fit_flat_sharded(rows, cases, max_steps, lam0, memory=None, table=None):
     mesh = Mesh(np.asarray(jax.devices()), ("d",))
     spec = PartitionSpec("d")
     # `check_vma=False`: the per-device bodies are independent (no collectives);
     # each device runs its own Levenberg-Marquardt loop to its own convergence.
     fn = jax.shard_map(
-        _fit_flat,
+        ft.partial(_fit_flat, memory=memory, table=table),
         mesh=mesh,
         in_specs=(spec, spec, spec, spec),
         out_specs=spec,
@@ -306,18 +315,24 @@ def _fit_flat_sharded(rows, cases, max_steps, lam0):
     return fn(rows, cases, max_steps, lam0)
 
 
-_PROGRAMS = {"one": jax.jit(_fit_flat), "sharded": jax.jit(_fit_flat_sharded)}
+_PROGRAMS = {
+    name: jax.jit(fn, static_argnames=("memory", "table"))
+    for name, fn in (("one", _fit_flat), ("sharded", _fit_flat_sharded))
+}
 _EXECUTABLES: dict = {}
 
 
-def _executable(kind: str, args: tuple, while_compiling: Callable[[], None] | None):
-    """The compiled fit program for these argument shapes, traced and compiled
-    ahead of time so that `while_compiling` runs between the two: XLA releases the
-    GIL while it compiles, tracing does not."""
+def _executable(
+    kind: str, args: tuple, flags: dict, while_compiling: Callable[[], None] | None
+):
+    """The compiled fit program for these argument shapes and static flags, traced
+    and compiled ahead of time so that `while_compiling` runs between the two: XLA
+    releases the GIL while it compiles, tracing does not."""
     leaves, tree = jax.tree.flatten(args)
     key = (kind, tree, tuple((np.shape(x), np.dtype(x.dtype)) for x in leaves))
+    key += tuple(sorted(flags.items()))
     if key not in _EXECUTABLES:
-        lowered = _PROGRAMS[kind].lower(*args)
+        lowered = _PROGRAMS[kind].lower(*args, **flags)
         if while_compiling is not None:
             while_compiling()
         _EXECUTABLES[key] = lowered.compile()
@@ -330,6 +345,9 @@ def fit_batch(
     max_steps: Int[np.ndarray, " N"],
     lam0: Float[np.ndarray, " N"],
     while_compiling: Callable[[], None] | None = None,
+    *,
+    memory: bool | None = None,
+    table: bool | None = None,
 ) -> RowFit:
     """Fit `N` rows, row `i` on case `i` (both stacked along axis 0), each with its
     own step budget and initial damping.
@@ -340,6 +358,9 @@ def fit_batch(
     dampings are traced, so changing them does not recompile; the cost of a batch is
     that of its longest-running row. `while_compiling` is called once the program
     for these shapes is traced, if it has to be compiled (work to overlap with it).
+    `memory`, `table`: whether the rows need the input-memory scan and the table
+    look-up, when that is known for every batch of a call (a smaller program);
+    None (default) decides per batch at run time.
     """
     args = (
         rows,
@@ -349,4 +370,6 @@ def fit_batch(
     )
     n_dev = jax.device_count()
     sharded = n_dev > 1 and rows.theta0.shape[0] % n_dev == 0
-    return _executable("sharded" if sharded else "one", args, while_compiling)(*args)
+    flags = {"memory": memory, "table": table}
+    kind = "sharded" if sharded else "one"
+    return _executable(kind, args, flags, while_compiling)(*args)

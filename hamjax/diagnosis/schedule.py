@@ -28,7 +28,7 @@ import jax.tree_util as jtu
 import numpy as np
 
 from ..montecarlo.sharding import effective_chunk
-from .augmented import Row, uses_memory
+from .augmented import NL_TABULATED, Row, uses_memory
 from .fit import LAMBDA0, RowFit, fit_batch, theta_std
 from .layout import Prepared, best_row_per_class, finite_sse
 
@@ -159,6 +159,14 @@ def run_queue(
         Item(c, k, rows[c].theta0[k], LAMBDA0, SCREEN_STEPS, "screen", "always")
         for c, k in order
     )
+    # What every batch of the call needs, where that is known in advance (a
+    # smaller compiled program); None: decided per batch at run time. A call of
+    # one screening batch gains nothing from skipping the memory scan at run time.
+    tabulated = {p.nominal.nl_kind == NL_TABULATED for p in preps}
+    flags = {
+        "memory": True if len(order) <= batch else None,
+        "table": tabulated.pop() if len(tabulated) == 1 else None,
+    }
 
     def done(item: Item, new: dict) -> None:
         c = item.case
@@ -209,7 +217,7 @@ def run_queue(
             FIRST_PASS if it.stage == "finish" and not flush else it.budget
             for it in take
         ]
-        out = run_batch(take, budgets, rows, arrays, batch, while_compiling)
+        out = run_batch(take, budgets, rows, arrays, batch, while_compiling, flags)
         for j, it in enumerate(take):
             done(it, {name: x[j] for name, x in out.items()})
 
@@ -221,9 +229,11 @@ def run_batch(
     arrays,
     batch: int,
     while_compiling: Callable[[], None] | None = None,
+    flags: dict | None = None,
 ) -> dict:
     """One batch: the items' rows and cases gathered on the host, padded to `batch`
-    with copies of the first item at a zero budget."""
+    with copies of the first item at a zero budget. `while_compiling`, `flags`
+    (`memory`, `table`): as in `fit.fit_batch`."""
     pad = batch - len(take)
     items = take + [take[0]] * pad
     pick = lambda name: np.stack(  # noqa: E731
@@ -243,6 +253,7 @@ def run_batch(
             np.asarray(budgets + [0] * pad, dtype=np.int32),
             np.asarray([it.lam0 for it in items]),
             while_compiling,
+            **(flags or {}),
         )
     )
     return {name: np.asarray(getattr(fit, name)) for name in FIELDS}

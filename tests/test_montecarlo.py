@@ -401,3 +401,21 @@ def test_cli_lists_and_runs_a_study(tmp_path, capsys):
     )
     assert main(["study"]) == 2
     assert "NAME" in capsys.readouterr().err
+
+
+def test_study_options_are_built_only_when_the_study_command_runs():
+    # Finding the studies imports every study module, so another command gets the
+    # bare `study` entry; `hamjax study NAME --help` and the top-level help keep
+    # the whole parser.
+    from hamjax.cli.main import build_parser
+
+    def study_names(argv):
+        parser = build_parser(argv)
+        (commands,) = [a for a in parser._actions if a.dest == "command"]
+        study = commands.choices["study"]
+        names = [a for a in study._actions if a.dest == "study"]
+        return set(names[0].choices) if names else set()
+
+    assert "simulation-throughput" in study_names(["study", "--list"])
+    assert "simulation-throughput" in study_names([])
+    assert study_names(["diagnose", "CASE", "--out", "study"]) == set()

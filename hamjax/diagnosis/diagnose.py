@@ -110,9 +110,10 @@ def diagnose_many(
     being `{"t", "v", "y"}` dicts of NumPy arrays.
 
     Cases are padded to a common length (records over `ONE_GROUP` samples to a
-    few), in order of map kind and length; per length, their candidate rows go through one
-    compiled batch (`schedule.run_queue`) of the screening rows of
-    `cases_per_batch` cases, split over the devices. `on_result(i, diagnosis)` is
+    few) and taken in order of map kind and length, so that a batch holds cases
+    alike; per length, their candidate rows go through one compiled batch
+    (`schedule.run_queue`) of the screening rows of `cases_per_batch` cases,
+    split over the devices. `on_result(i, diagnosis)` is
     called as soon as case `i` is done, so a caller can write each result while the
     others are still being fitted.
     """

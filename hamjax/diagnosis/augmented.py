@@ -211,6 +211,17 @@ def linear_polynomials(p: Float[Array, " S"], case: CaseArrays) -> tuple[Array, 
     return jnp.where(ct, b_ct, g * case.b_disc), jnp.where(ct, c, a_disc)
 
 
+def switch(flag: bool | Bool[Array, ""], on: Callable, off: Callable, *args):
+    """`on(*args)` if `flag` else `off(*args)`: chosen when tracing for a Python
+    bool (the other branch is not compiled), at run time (`lax.cond`) for a traced
+    flag, which must be the same for a whole batch (not mapped over)."""
+    if flag is True:
+        return on(*args)
+    if flag is False:
+        return off(*args)
+    return lax.cond(flag, on, off, *args)
+
+
 def _table(v: Array, p: Float[Array, " S"], case: CaseArrays) -> Array:
     si, so = p[NOMINAL_SLOTS.index("in_scale")], p[NOMINAL_SLOTS.index("out_scale")]
     return so * jnp.interp(si * v, case.tab_v, case.tab_u)
@@ -231,12 +242,7 @@ def static_map(
     pl = jnp.where(
         v > d1, k1 * (v - d1) + l1, jnp.where(v < d2, k2 * (v - d2) + l2, 0.0)
     )
-    if table is True:
-        tab = _table(v, p, case)
-    elif table is False:
-        tab = jnp.zeros_like(v)
-    else:
-        tab = lax.cond(table, _table, lambda v, *_: jnp.zeros_like(v), v, p, case)
+    tab = switch(table, _table, lambda v, *_: jnp.zeros_like(v), v, p, case)
     return jnp.where(
         case.nl_kind == NL_PIECEWISE,
         pl,
@@ -369,13 +375,7 @@ def simulate_with_filter(
     """`simulate_augmented` with the filter `(b, a) = filter_coefficients(p, case)`
     already at hand (a fit has it; the matrix exponential is not repeated)."""
     v = delay(v, tau)
-    args = (v, *memory_arguments(p, case))
-    if memory is True:
-        x = input_memory(*args)
-    elif memory is False:
-        x = v
-    else:
-        x = lax.cond(memory, input_memory, lambda v, *_: v, *args)
+    x = switch(memory, input_memory, lambda v, *_: v, v, *memory_arguments(p, case))
     w = filter_df2t(b, a, static_part(x, p, case, table))
     return output_part(w, p, case)
 

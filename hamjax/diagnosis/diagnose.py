@@ -1,6 +1,7 @@
 """`diagnose_gap`: where the sim-to-real gap lies, which effect causes it, how far it
 shrinks once that effect is added (the contract `../shared/contracts/gap-case.md`)."""
 
+import functools as ft
 from collections import defaultdict
 from collections.abc import Callable
 
@@ -124,12 +125,8 @@ def diagnose_many(
     for i in sorted(range(len(items)), key=lambda i: (kinds[i], lengths[i])):
         groups[max(_length_group(lengths[i]), ONE_GROUP)].append(i)
     n_params = max(n_free_parameters(plant) for plant, *_ in items)
-    noise_compile: list = []  # the noise models compile while the fits do
-
-    def overlap() -> None:
-        if not noise_compile:
-            noise_compile.append(compile_in_background(lengths))
-
+    # the noise models compile while the fits do (once per call)
+    overlap = ft.cache(ft.partial(compile_in_background, lengths))
     out: list = [None] * len(items)
     for members in groups.values():
         length = max(_length_group(lengths[i]) for i in members)

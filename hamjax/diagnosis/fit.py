@@ -28,6 +28,7 @@ from .augmented import (
     output_part,
     simulate_with_filter,
     static_part,
+    switch,
     uses_memory,
 )
 from .effects.time_delay import delay
@@ -65,15 +66,9 @@ def _block_model(p, b, a, state, vb, case, memory, table):
     """One block of the estimation record through the augmented model, from the
     scans' `state = (rate-limited input, play output, filter state)`."""
     xr, xb, z = state
-    max_step, width = memory_arguments(p, case)
-    if memory is True:
-        (xr, xb), x = memory_scan(vb, (xr, xb), max_step, width)
-    elif memory is False:
-        x = vb
-    else:
-        (xr, xb), x = lax.cond(
-            memory, memory_scan, lambda v, s, *_: (s, v), vb, (xr, xb), max_step, width
-        )
+    skip = lambda v, s, *_: (s, v)  # noqa: E731
+    args = (vb, (xr, xb), *memory_arguments(p, case))
+    (xr, xb), x = switch(memory, memory_scan, skip, *args)
     z, w = filter_scan(b, a, static_part(x, p, case, table), z)
     return (xr, xb, z), output_part(w, p, case)
 

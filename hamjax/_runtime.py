@@ -52,7 +52,7 @@ def split_cpu_into_devices() -> None:
 def use_compilation_cache() -> None:
     """Keep XLA's compiled programs on disk between `hamjax` runs.
 
-    The diagnosis compiles its batched fits for ~6 s (once per call for records
+    The diagnosis compiles its batched fits for 3-5 s (once per call for records
     up to 8192 samples); with the cache a later call with the same shapes skips
     that. The folder is
     `$HAMJAX_CACHE_DIR`, else `$XDG_CACHE_HOME/hamjax/xla` (default

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 from helpers import run_on_two_devices
 
+import hamjax.diagnosis.fit as fit_module
 import hamjax.diagnosis.schedule as schedule
 from hamjax.diagnosis.augmented import NL_TABULATED, slot_index, uses_memory
 from hamjax.diagnosis.fit import LAMBDA0, fit_batch, theta_std
@@ -300,3 +301,40 @@ def test_static_flags_give_the_run_time_decision():
     # and the flags are not ignored: without the scan the backlash row cannot fit
     k = [name for name, _ in prep.rows].index("backlash")
     assert sse(memory=False)[k] > 10 * default[k]
+
+
+@pytest.mark.slow
+def test_compiler_options_change_only_rounding(monkeypatch):
+    # `fit.COMPILER_OPTIONS` (XLA's older CPU loop emitters: a faster compile) and
+    # XLA's defaults compile the same program: same fits to rounding.
+    prep = prepare(*tiny_case(jr.key(7), "dead_zone", noise=1e-3))
+    n = len(prep.rows)
+    rows = _stack([r for _, r in prep.rows])
+    cases = _stack([prep.arrays] * n)
+
+    def fit():
+        monkeypatch.setattr(fit_module, "_EXECUTABLES", {})  # compile again
+        out = fit_batch(rows, cases, np.full(n, 15), np.full(n, LAMBDA0))
+        return np.asarray(out.sse_est), np.asarray(out.theta)
+
+    assert fit_module.COMPILER_OPTIONS  # the shipped options are in use
+    sse, theta = fit()
+    monkeypatch.setattr(fit_module, "COMPILER_OPTIONS", {})
+    sse_default, theta_default = fit()
+    np.testing.assert_allclose(sse, sse_default, rtol=1e-9)
+    np.testing.assert_allclose(theta, theta_default, rtol=1e-6, atol=1e-9)
+
+
+def test_unknown_compiler_option_falls_back_to_the_defaults(monkeypatch):
+    # An XLA that does not know an option compiles with its defaults; any other
+    # compile error is raised.
+    lowered = jax.jit(lambda x: 2.0 * x).lower(jnp.ones(3))
+    monkeypatch.setattr(fit_module, "COMPILER_OPTIONS", {"xla_no_such_option": 1})
+    np.testing.assert_array_equal(fit_module._compile(lowered)(jnp.ones(3)), 2.0)
+
+    class Broken:
+        def compile(self, **kwargs):
+            raise RuntimeError("out of memory")
+
+    with pytest.raises(RuntimeError, match="out of memory"):
+        fit_module._compile(Broken())

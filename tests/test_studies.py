@@ -52,3 +52,27 @@ def test_every_study_script_names_a_registered_study():
             continue
         name = text.split('study_main("', 1)[1].split('"', 1)[0]
         assert name in registered, f"{path.name} runs unregistered study {name!r}"
+
+
+@pytest.mark.slow
+def test_compile_options_study_times_each_configuration(tmp_path):
+    # One tiny blind case, each XLA configuration once, each in a fresh process: the
+    # compile options change rounding only, so every configuration names the same
+    # effect; each compiles the fit program once (a positive compile time).
+    import jax.random as jr
+
+    from hamjax.diagnosis.blind import make_cases
+
+    make_cases(jr.key(3), 1, tmp_path / "set")
+    case = next((tmp_path / "set" / "cases").iterdir())
+    out = tmp_path / "out"
+    argv = ["--single", str(case), "--repeats", "1", "--out", str(out)]
+    assert _load("diagnosis_compile_options").main(argv) == 0
+    summary = json.loads((out / "compile_options.json").read_text())["one_case"]
+    assert set(summary) == {"cases", "xla-defaults", "hamjax", "hamjax+opt0"}
+    for config in ("xla-defaults", "hamjax", "hamjax+opt0"):
+        assert summary[config]["same_effect_as_defaults"] == 1.0
+        assert summary[config]["median_s"]["compile"] > 0.0
+        assert (
+            summary[config]["median_s"]["wall"] > summary[config]["median_s"]["compile"]
+        )

@@ -1,6 +1,10 @@
 """Effects of the gap catalogue: neutral at neutral parameters, against independent
 references; the universal augmented model against `hj.simulate`; residual tests."""
 
+import os
+import subprocess
+import sys
+
 import jax
 import jax.numpy as jnp
 import jax.random as jr
@@ -237,3 +241,23 @@ def test_blocked_normal_equations_equal_the_full_record_jacobian(plant, getkey):
         row = prep.rows[0][1]
         sse = blocked(row.theta0, row, A, on, on)[0]
         assert not np.isclose(sse, blocked(row.theta0, row, A, on, ~on)[0])
+
+
+def test_diagnosis_without_float64_is_refused():
+    # In a process that never enabled float64 the diagnosis would silently fit in
+    # float32 (other minima, other effects named): it says what to do instead.
+    code = (
+        "import jax.random as jr\n"
+        "from hamjax.diagnosis.diagnose import diagnose_gap\n"
+        "from hamjax.internal.gap_cases import tiny_case\n"
+        "try:\n"
+        "    diagnose_gap(*tiny_case(jr.key(0), 'backlash', noise=1e-3))\n"
+        "except RuntimeError as e:\n"
+        "    print(e)\n"
+    )
+    env = {k: v for k, v in os.environ.items() if k != "JAX_ENABLE_X64"}
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, env=env
+    )
+    assert out.returncode == 0, out.stderr
+    assert "needs float64: call hamjax.enable_x64()" in out.stdout

@@ -6,6 +6,7 @@ from collections import defaultdict
 from collections.abc import Callable
 
 import equinox as eqx
+import jax
 import numpy as np
 
 from ..models import Hammerstein
@@ -118,6 +119,12 @@ def diagnose_many(
     called as soon as case `i` is done, so a caller can write each result while the
     others are still being fitted.
     """
+    if not jax.config.jax_enable_x64:
+        # float32 fits stop early and at other minima: different, worse diagnoses
+        raise RuntimeError(
+            "the diagnosis needs float64: call hamjax.enable_x64() (or set "
+            "JAX_ENABLE_X64=1) before the first JAX computation"
+        )
     lengths = [max(est["v"].shape[0], val["v"].shape[0]) for *_, est, val in items]
     kinds = [describe_nominal(plant).nl_kind for plant, *_ in items]
     groups = defaultdict(list)

@@ -14,7 +14,7 @@ from .attribute import Attribution, attribute
 from .layout import bucket, describe_nominal, n_free_parameters, prepare
 from .locate import locate
 from .noise_fit import compile_in_background
-from .schedule import batch_size, run_queue
+from .schedule import CASES_PER_BATCH, batch_size, run_queue
 
 
 class GapDiagnosis(eqx.Module):
@@ -105,7 +105,7 @@ def _result(prep, att: Attribution, val: dict) -> GapDiagnosis:
 def diagnose_many(
     items: list[tuple[Hammerstein, float, dict, dict]],
     *,
-    cases_per_batch: int = 8,
+    cases_per_batch: int = CASES_PER_BATCH,
     on_result: Callable[[int, GapDiagnosis], None] | None = None,
 ) -> list[GapDiagnosis]:
     """Diagnose several cases: `(plant, dt, estimation, validation)` each, the records

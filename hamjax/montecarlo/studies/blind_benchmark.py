@@ -13,7 +13,7 @@ DESCRIPTION = (
     "false alarm on none, median shrink, seconds per case"
 )
 DEFAULT_REALISATIONS = 240
-DEFAULT_CHUNK = 8
+DEFAULT_CHUNK = 4  # cases per batch (`diagnosis.schedule.CASES_PER_BATCH`)
 SPLIT_CPU = True  # `hamjax study` exposes each core as a device first
 
 

@@ -10,7 +10,7 @@ DESCRIPTION = (
     "diagnosis of the real datasets (effect named, gap before/after vs literature)"
 )
 DEFAULT_REALISATIONS = 80  # stiction loops included
-DEFAULT_CHUNK = 8
+DEFAULT_CHUNK = 4  # cases per batch (`diagnosis.schedule.CASES_PER_BATCH`)
 SPLIT_CPU = True  # `hamjax study` exposes each core as a device first
 
 

@@ -249,7 +249,7 @@ def test_diagnosis_without_float64_is_refused():
     code = (
         "import jax.random as jr\n"
         "from hamjax.diagnosis.diagnose import diagnose_gap\n"
-        "from hamjax.internal.gap_cases import tiny_case\n"
+        "from hamjax.papers.gap.demo_cases import tiny_case\n"
         "try:\n"
         "    diagnose_gap(*tiny_case(jr.key(0), 'backlash', noise=1e-3))\n"
         "except RuntimeError as e:\n"

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from hamjax.cli.main import main
-from hamjax.diagnosis.blind import make_case, score
-from hamjax.internal.gap_cases import tiny_case
 from hamjax.io import model_to_dict, write_csv, write_json
+from hamjax.papers.gap.blind import make_case, score
+from hamjax.papers.gap.demo_cases import tiny_case
 
 
 def _write_case(folder, effect="saturation", key=0, n=300):
@@ -133,7 +133,7 @@ def test_blind_realistic_draws_and_score_arithmetic():
 
 @pytest.mark.slow
 def test_demo_section_writes_report_and_figures(tmp_path, mplcleanup):
-    from hamjax.internal.gap_cases import run_demo
+    from hamjax.papers.gap.demo_cases import run_demo
 
     made = run_demo(jr.key(0), tmp_path)
     for path, _ in made:
@@ -146,15 +146,10 @@ def test_demo_section_writes_report_and_figures(tmp_path, mplcleanup):
 
 @pytest.mark.slow
 def test_studies_run_tiny(tmp_path):
-    import importlib.util
-    from pathlib import Path
+    from hamjax.cli.study import study_main
 
-    root = Path(__file__).resolve().parents[1] / "studies"
-    spec = importlib.util.spec_from_file_location("bb", root / "blind_benchmark.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
     argv = ["--realisations", "2", "--chunk", "2", "--modes", "exact", "--quiet"]
-    assert mod.main([*argv, "--out", str(tmp_path / "bb")]) == 0
+    assert study_main("blind-benchmark", [*argv, "--out", str(tmp_path / "bb")]) == 0
     s = json.loads((tmp_path / "bb" / "summary.json").read_text())
     assert (
         s["exact"]["n_cases"] == 2

@@ -25,7 +25,7 @@ from hamjax.diagnosis.schedule import (
     run_batch,
     run_queue,
 )
-from hamjax.internal.gap_cases import tiny_case
+from hamjax.papers.gap.demo_cases import tiny_case
 
 
 SETUP = textwrap.dedent(
@@ -35,7 +35,7 @@ SETUP = textwrap.dedent(
     import jax.tree_util as jtu
     import numpy as np
     from hamjax.diagnosis.layout import prepare
-    from hamjax.internal.gap_cases import tiny_case
+    from hamjax.papers.gap.demo_cases import tiny_case
 
     def stack(xs):
         return jtu.tree_map(lambda *x: jnp.stack(x), *xs)

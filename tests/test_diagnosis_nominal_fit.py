@@ -7,7 +7,7 @@ import pytest
 
 import hamjax as hj
 from hamjax.diagnosis.nominal_fit import fit_nominal
-from hamjax.internal.gap_cases import staircase
+from hamjax.papers.gap.demo_cases import staircase
 
 
 def _record(plant, v, dt):

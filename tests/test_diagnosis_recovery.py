@@ -6,10 +6,10 @@ import jax.random as jr
 import numpy as np
 import pytest
 
-from hamjax.diagnosis.blind import make_case
 from hamjax.diagnosis.diagnose import diagnose_many
-from hamjax.internal.gap_cases import EXACT_PARAMS, coloured_case, tiny_case
 from hamjax.io import load_model
+from hamjax.papers.gap.blind import make_case
+from hamjax.papers.gap.demo_cases import EXACT_PARAMS, coloured_case, tiny_case
 
 
 EFFECTS = [

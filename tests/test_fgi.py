@@ -10,12 +10,12 @@ import pytest
 from scipy import signal, stats
 
 import hamjax as hj
-from hamjax.identification.fgi import identify_fgi, trans_period_average
-from hamjax.identification.fourier import (
+from hamjax.identification.seed000.fgi_table2 import identify_fgi, trans_period_average
+from hamjax.identification.seed000.fourier_13_22 import (
     piecewise_constant_coefficients,
     sampled_coefficients,
 )
-from hamjax.internal.backlash_shapes import SHAPES, cycle_points
+from hamjax.papers.seed000.border_shapes import SHAPES, cycle_points
 
 
 LEVELS = np.array([-1.0, -0.5, 0.0, 0.5, 1.0])
@@ -337,7 +337,7 @@ def test_cli_round_trip_two_omegas(tmp_path, capsys):
 
 
 def test_plots(mplcleanup):
-    from hamjax.identification.nbbi import identify_nbbi
+    from hamjax.identification.seed000.nbbi_table1 import identify_nbbi
     from hamjax.plotting.backlash import plot_bode, plot_cycle, plot_nbbi_experiment
 
     dt, hold = 0.05, 5.0

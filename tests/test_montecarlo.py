@@ -20,11 +20,11 @@ from hamjax.montecarlo import (
     storage,
     summarise,
 )
-from hamjax.montecarlo.studies.simulation_throughput import make_trial
 from hamjax.montecarlo.time_major import (
     normalised_gradient_time_major,
     output_summary,
 )
+from hamjax.papers.engine.studies.simulation_throughput import make_trial
 
 
 def _trial(key):
@@ -112,7 +112,7 @@ def test_static_nonlinearity_summary_matches_simulate(getkey):
 
 
 def test_normalised_gradient_time_major_equals_recursive_pl(getkey):
-    rpl = pytest.importorskip("hamjax.identification.recursive_pl")
+    rpl = pytest.importorskip("hamjax.identification.seed001")
     levels = jnp.array([-6.0, -3.0, 3.0, 6.0])
     _, v = hj.pe_impulse_sequence(levels, order=2, periods=6)
     plant = hj.Hammerstein(

@@ -28,7 +28,7 @@ CHILD = TRIAL + textwrap.dedent(
     import numpy as np
     jax.config.update("jax_enable_x64", True)
     from hamjax.montecarlo import MonteCarloConfig, run_monte_carlo, runner
-    from hamjax.montecarlo.sharding import put_indices, realisation_sharding
+    from hamjax.simulation.sharding import put_indices, realisation_sharding
 
     assert len(jax.devices()) == 2, jax.devices()
     sharding = realisation_sharding()

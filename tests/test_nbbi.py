@@ -11,8 +11,8 @@ from helpers import reference_backlash
 from scipy import stats
 
 import hamjax as hj
-from hamjax.identification.nbbi import check_assumptions, identify_nbbi
-from hamjax.internal.backlash_shapes import SHAPES, cycle_points
+from hamjax.identification.seed000.nbbi_table1 import check_assumptions, identify_nbbi
+from hamjax.papers.seed000.border_shapes import SHAPES, cycle_points
 
 
 LEVELS = np.array([-1.0, -0.5, 0.0, 0.5, 1.0])

@@ -10,7 +10,7 @@ from hypothesis import given, settings, strategies as st
 from scipy import signal, stats
 
 import hamjax as hj
-from hamjax.identification.recursive_pl import (
+from hamjax.identification.seed001 import (
     batch_least_squares,
     check_levels,
     dead_zone_rule,
@@ -28,7 +28,7 @@ from hamjax.identification.recursive_pl import (
     structure_consistent,
     symmetric_rule,
 )
-from hamjax.internal.recursive_pl_plants import paper_case, random_case
+from hamjax.papers.seed001.plants import paper_case, random_case
 
 
 PAPER_LEVELS = np.array([-6.0, -3.0, 3.0, 6.0])

@@ -11,7 +11,8 @@ import pytest
 from scipy import stats
 
 import hamjax as hj
-from hamjax.internal.defaults import seed000_plant, seed001_plant
+from hamjax.papers.seed000.plants import seed000_plant
+from hamjax.papers.seed001.plants import seed001_plant
 from hamjax.refinement import (
     AbstractParametrisation,
     BacklashPathParametrisation,

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 import hamjax as hj
-from hamjax.internal.defaults import seed000_plant, seed001_plant
+from hamjax.papers.seed000.plants import seed000_plant
+from hamjax.papers.seed001.plants import seed001_plant
 from hamjax.refinement import refine_nbbi_result, refine_recursive_pl_result
 
 
@@ -16,10 +17,10 @@ from hamjax.refinement import refine_nbbi_result, refine_recursive_pl_result
 def test_recursive_pl_study_tiny(tmp_path):
     import jax.random as jr
 
-    from hamjax.montecarlo.studies import refinement_recursive_pl as study
+    from hamjax.papers.seed001.studies import refinement_recursive_pl as study
 
     args = argparse.Namespace(
-        periods="4", snrs="20", solver="levenberg-marquardt", timing=False
+        periods=[4], snrs=[20.0], solver="levenberg-marquardt", timing=False
     )
     summary = study.run(
         jr.key(0), realisations=4, chunk=4, out=tmp_path, quiet=True, args=args
@@ -38,10 +39,10 @@ def test_recursive_pl_study_tiny(tmp_path):
 def test_nbbi_study_tiny(tmp_path):
     import jax.random as jr
 
-    from hamjax.montecarlo.studies import refinement_nbbi as study
+    from hamjax.papers.seed000.studies import refinement_nbbi as study
 
     args = argparse.Namespace(
-        holds="3", snrs="40", dt=0.1, solver="levenberg-marquardt", timing=False
+        holds=[3.0], snrs=[40.0], dt=0.1, solver="levenberg-marquardt", timing=False
     )
     summary = study.run(
         jr.key(0), realisations=2, chunk=2, out=tmp_path, quiet=True, args=args
@@ -84,7 +85,7 @@ def test_refine_recursive_pl_result_noise_free():
 
 @pytest.mark.slow
 def test_refine_nbbi_result_noise_free():
-    from hamjax.identification.nbbi import identify_nbbi
+    from hamjax.identification.seed000.nbbi_table1 import identify_nbbi
 
     plant, levels, _, _ = seed000_plant()
     dt, hold = 0.1, 4.0

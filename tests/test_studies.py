@@ -1,57 +1,83 @@
-"""Every script in studies/ runs with tiny arguments (the NumPyro `test_examples` idea).
+"""Every registered study runs with tiny arguments through `hamjax study NAME` (the
+NumPyro `test_examples` idea), and every module of the study packages is a study.
 
 Seed 001's studies are exercised in `test_recursive_pl_studies.py`; the diagnosis
 and refinement studies in their own test files. This file runs the remaining
-registered studies through their `studies/<name>.py` scripts, so the scripts
-themselves are tested, and checks that every study script names a registered study.
+registered studies through the command line, and the compile-options benchmark
+through its script in `benchmarks/`.
 """
 
 import importlib.util
 import json
+import pkgutil
 from pathlib import Path
 
 import pytest
 
+from hamjax.cli.main import main as hamjax_main
 from hamjax.montecarlo.registry import discover_studies
+from hamjax.papers import STUDY_PACKAGES
 
 
-STUDIES_DIR = Path(__file__).resolve().parents[1] / "studies"
+BENCHMARKS_DIR = Path(__file__).resolve().parents[1] / "benchmarks"
 
 TINY = {
-    "nbbi_rate": (["--ns", "3,6,12"], "nbbi_rate.json"),
-    "fgi_rate": (["--ms", "1,2,4"], "fgi_rate.json"),
-    "fgi_pipeline": (["--noises", "0.1,0.3,1"], "fgi_pipeline.json"),
-    "nbbi_shapes": (["--levels", "3", "--hold", "4"], "nbbi_shapes.json"),
+    "nbbi-rate": (["--ns", "3,6,12"], "nbbi_rate.json"),
+    "fgi-rate": (["--ms", "1,2,4"], "fgi_rate.json"),
+    "fgi-pipeline": (["--noises", "0.1,0.3,1"], "fgi_pipeline.json"),
+    "nbbi-shapes": (["--levels", "3", "--hold", "4"], "nbbi_shapes.json"),
 }
 
 
 def _load(script: str):
-    spec = importlib.util.spec_from_file_location(script, STUDIES_DIR / f"{script}.py")
+    path = BENCHMARKS_DIR / f"{script}.py"
+    spec = importlib.util.spec_from_file_location(script, path)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("script", sorted(TINY))
-def test_study_script_runs_tiny(script, tmp_path, mplcleanup):
-    extra, summary_name = TINY[script]
-    out = tmp_path / script
+@pytest.mark.parametrize("name", sorted(TINY))
+def test_study_runs_tiny(name, tmp_path, mplcleanup):
+    extra, summary_name = TINY[name]
+    out = tmp_path / name
     argv = ["--realisations", "4", "--chunk", "2", "--quiet", "--out", str(out), *extra]
-    assert _load(script).main(argv) == 0
+    assert hamjax_main(["study", name, *argv]) == 0
     summary = json.loads((out / summary_name).read_text())
     assert summary  # a non-empty JSON summary ...
     assert list(out.glob("*.png"))  # ... and at least one figure
 
 
-def test_every_study_script_names_a_registered_study():
-    registered = set(discover_studies())
-    for path in sorted(STUDIES_DIR.glob("*.py")):
-        text = path.read_text()
-        if "study_main(" not in text:
-            continue
-        name = text.split('study_main("', 1)[1].split('"', 1)[0]
-        assert name in registered, f"{path.name} runs unregistered study {name!r}"
+def test_every_module_of_the_study_packages_is_a_working_study():
+    # A module that fails to import or lacks NAME/DESCRIPTION/run is listed with
+    # its error in parentheses; none may be, and each module gives one study.
+    import importlib
+
+    studies = discover_studies(STUDY_PACKAGES)
+    modules = [
+        info.name
+        for package in STUDY_PACKAGES
+        for info in pkgutil.iter_modules(importlib.import_module(package).__path__)
+        if not info.name.startswith("_")
+    ]
+    assert len(studies) == len(modules)
+    broken = {n: s.description for n, s in studies.items() if s.description[:1] == "("}
+    assert broken == {}
+
+
+def test_a_study_name_defined_twice_is_refused(tmp_path, monkeypatch):
+    for package in ("pkg_a", "pkg_b"):
+        folder = tmp_path / package
+        folder.mkdir()
+        (folder / "__init__.py").write_text("")
+        (folder / "same.py").write_text(
+            'NAME = "same"\nDESCRIPTION = "d"\n\n\ndef run(key, **kw):\n    return {}\n'
+        )
+    monkeypatch.syspath_prepend(str(tmp_path))
+    assert list(discover_studies(["pkg_a"])) == ["same"]
+    with pytest.raises(ValueError, match="defined twice"):
+        discover_studies(["pkg_a", "pkg_b"])
 
 
 @pytest.mark.slow
@@ -61,7 +87,7 @@ def test_compile_options_study_times_each_configuration(tmp_path):
     # effect; each compiles the fit program once (a positive compile time).
     import jax.random as jr
 
-    from hamjax.diagnosis.blind import make_cases
+    from hamjax.papers.gap.blind import make_cases
 
     make_cases(jr.key(3), 1, tmp_path / "set")
     case = next((tmp_path / "set" / "cases").iterdir())

@@ -1,4 +1,4 @@
-"""studies/scipy_reference_diagnosis.py: issue 7's scipy baseline diagnosis.
+"""benchmarks/scipy_reference_diagnosis.py: issue 7's scipy baseline diagnosis.
 
 Neutral effect parameters reproduce the nominal simulation exactly, the reference
 names the effect on noise-free cases built here with plain NumPy/SciPy, and the
@@ -19,7 +19,7 @@ from hamjax.cli.main import main as hamjax_main
 
 
 SCRIPT = (
-    Path(__file__).resolve().parents[1] / "studies" / "scipy_reference_diagnosis.py"
+    Path(__file__).resolve().parents[1] / "benchmarks" / "scipy_reference_diagnosis.py"
 )
 
 

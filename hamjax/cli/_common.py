@@ -1,39 +1,8 @@
-"""Argument helpers shared by the subcommands."""
+"""Argument helpers shared by the subcommands (the types live in `hamjax._argtypes`,
+which the studies' own options use too)."""
 
-import argparse
-import math
-
-
-def float_list(text: str) -> list[float]:
-    """Parse a comma-separated list of finite numbers (`--levels=-6,-3,3,6`)."""
-    try:
-        values = [float(x) for x in text.split(",") if x.strip() != ""]
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"expected comma-separated numbers, got {text!r}"
-        ) from None
-    if not values:
-        raise argparse.ArgumentTypeError("expected at least one number")
-    if not all(math.isfinite(x) for x in values):
-        raise argparse.ArgumentTypeError(f"numbers must be finite, got {text!r}")
-    return values
-
-
-def positive_float(text: str) -> float:
-    try:
-        x = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not (math.isfinite(x) and x > 0):
-        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}")
-    return x
-
-
-def positive_int(text: str) -> int:
-    try:
-        x = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
-    if x < 1:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text!r}")
-    return x
+from .._argtypes import (
+    float_list as float_list,
+    positive_float as positive_float,
+    positive_int as positive_int,
+)

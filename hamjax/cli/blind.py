@@ -32,7 +32,7 @@ def register(sub) -> None:
 def run_make(args: argparse.Namespace) -> int:
     import jax.random as jr
 
-    from ..diagnosis.blind import make_cases
+    from ..papers.gap.blind import make_cases
 
     truth = make_cases(jr.key(args.seed), args.cases, args.out, realism=args.realism)
     print(f"wrote {len(truth['cases'])} {args.realism} cases to {args.out / 'cases'}")
@@ -41,8 +41,8 @@ def run_make(args: argparse.Namespace) -> int:
 
 
 def run_score(args: argparse.Namespace) -> int:
-    from ..diagnosis.blind import format_score, score_folder
     from ..io import write_json
+    from ..papers.gap.blind import format_score, score_folder
 
     s = score_folder(args.dir, args.results)
     print(format_score(s))

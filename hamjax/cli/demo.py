@@ -12,17 +12,17 @@ import jax.random as jr
 # Each section module defines `run(key, out) -> [(file, description), ...]`. A
 # section that fails is reported and the others still run (nothing is lost).
 SECTIONS = [
-    ("core: plants, inputs, outputs", "hamjax.internal.demo.core"),
+    ("core: plants, inputs, outputs", "hamjax.demo.core"),
     (
         "seed 001: recursive identification (Fig. 3)",
-        "hamjax.internal.demo.recursive_pl",
+        "hamjax.demo.recursive_pl",
     ),
     (
         "seed 000: NBBI + FGI (Figs. 5, 6, Bode)",
-        "hamjax.internal.demo.backlash_frequency",
+        "hamjax.demo.backlash_frequency",
     ),
-    ("refinement: closed form vs refined vs CRLB", "hamjax.internal.demo.refinement"),
-    ("diagnosis of a withheld-effect case", "hamjax.internal.demo.diagnosis"),
+    ("refinement: closed form vs refined vs CRLB", "hamjax.demo.refinement"),
+    ("diagnosis of a withheld-effect case", "hamjax.demo.diagnosis"),
 ]
 
 

@@ -54,7 +54,11 @@ def run(args: argparse.Namespace) -> int:
 
         def write(i, d):  # each case is written as soon as its chunk is done
             name, out = names[i]
-            write_diagnosis(d, out, name, figures=args.figures)
+            write_diagnosis(d, out, name)
+            if args.figures:
+                from ..plotting.diagnosis import save_diagnosis_figures
+
+                save_diagnosis_figures(d, out)
             if not args.quiet:
                 print(
                     f"{name}: {d.effect} (gap {d.gap_before:.4g} -> {d.gap_after:.4g}, "

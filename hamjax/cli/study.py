@@ -5,6 +5,7 @@ import sys
 from pathlib import Path
 
 from .._errors import UserInputError
+from ..papers import STUDY_PACKAGES
 from ._common import positive_int
 
 
@@ -32,7 +33,7 @@ def register(sub) -> None:
     names = parser.add_subparsers(
         dest="study", metavar="NAME", parser_class=type(parser)
     )
-    for study in discover_studies().values():
+    for study in discover_studies(STUDY_PACKAGES).values():
         p = names.add_parser(
             study.name, help=study.description, description=study.description
         )
@@ -73,14 +74,14 @@ def run(args: argparse.Namespace) -> int:
     from ..montecarlo.registry import discover_studies, get_study
 
     if args.list:
-        studies = discover_studies()
+        studies = discover_studies(STUDY_PACKAGES)
         width = max((len(n) for n in studies), default=0)
         for name, study in studies.items():
             print(f"{name:<{width}}  {study.description}")
         return 0
     if args.study is None:
         raise UserInputError("give a study NAME (`hamjax study --list` shows them)")
-    return run_study(get_study(args.study), args)
+    return run_study(get_study(args.study, STUDY_PACKAGES), args)
 
 
 def run_study(study, args: argparse.Namespace) -> int:
@@ -114,13 +115,13 @@ def run_study(study, args: argparse.Namespace) -> int:
 
 
 def study_main(name: str, argv: list[str] | None = None) -> int:
-    """`main(argv)` of a thin `studies/<name>.py` script: same options as the CLI."""
+    """Run the study `name` from a script or a test with the options of\n    `hamjax study NAME` (`argv` without the name); 2 on a user error."""
     import matplotlib
 
     from ..montecarlo.registry import get_study
 
     matplotlib.use("Agg")
-    study = get_study(name)
+    study = get_study(name, STUDY_PACKAGES)
     parser = argparse.ArgumentParser(prog=f"{name}.py", description=study.description)
     add_study_arguments(parser, study)
     args = parser.parse_args(argv)

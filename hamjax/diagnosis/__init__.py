@@ -1,4 +1,6 @@
-from .blind import make_case as make_case, make_cases as make_cases, score as score
+"""The sim-to-real gap diagnosis: where the gap lies, which effect causes it, how far
+it shrinks. (The withheld-effect case generator is `hamjax.papers.gap.blind`.)"""
+
 from .case import GapCase as GapCase, read_case as read_case
 from .diagnose import (
     GapDiagnosis as GapDiagnosis,

@@ -318,7 +318,7 @@ _EXECUTABLES: dict = {}
 # XLA's CPU back end compiles this program (~300 fusions, most of them small loop
 # bodies) about 40 % faster with its older loop emitters than with the fusion
 # emitters, and the batches run as fast (measured in
-# `studies/diagnosis_compile_options.py`). An XLA without the option compiles
+# `benchmarks/diagnosis_compile_options.py`). An XLA without the option compiles
 # with its defaults.
 COMPILER_OPTIONS = {"xla_cpu_use_fusion_emitters": False}
 

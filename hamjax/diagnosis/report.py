@@ -135,12 +135,9 @@ def report_markdown(d, name: str = "case") -> str:
     return "\n".join(lines)
 
 
-def write_diagnosis(d, out: Path, name: str = "case", figures: bool = False) -> None:
-    """Write `diagnosis.json` and `report.md` (and the figures) into `out`."""
+def write_diagnosis(d, out: Path, name: str = "case") -> None:
+    """Write `diagnosis.json` and `report.md` into `out` (the figures are
+    `hamjax.plotting.diagnosis.save_diagnosis_figures`)."""
     out.mkdir(parents=True, exist_ok=True)
     write_json(out / "diagnosis.json", _clean(diagnosis_dict(d)))
     atomic_write_text(out / "report.md", report_markdown(d, name))
-    if figures:
-        from ..plotting.diagnosis import save_diagnosis_figures
-
-        save_diagnosis_figures(d, out)

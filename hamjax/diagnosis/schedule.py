@@ -27,7 +27,7 @@ import jax
 import jax.tree_util as jtu
 import numpy as np
 
-from ..montecarlo.sharding import effective_chunk
+from ..simulation.sharding import effective_chunk
 from .augmented import NL_TABULATED, Row, uses_memory
 from .fit import LAMBDA0, RowFit, fit_batch, theta_std
 from .layout import Prepared, best_row_per_class, finite_sse

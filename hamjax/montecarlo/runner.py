@@ -13,10 +13,15 @@ import numpy as np
 from jaxtyping import PyTree
 
 from .._types import Key
+from ..simulation.sharding import (
+    effective_chunk,
+    put_indices,
+    realisation_sharding,
+    to_host,
+)
 from . import storage
 from .config import MonteCarloConfig
 from .progress import progress_bar
-from .sharding import effective_chunk, put_indices, realisation_sharding, to_host
 
 
 @eqx.filter_jit

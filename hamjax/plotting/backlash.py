@@ -8,8 +8,8 @@ import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
-from ..identification.fgi import FGIResult
-from ..identification.nbbi import NBBIResult
+from ..identification.seed000.fgi_table2 import FGIResult
+from ..identification.seed000.nbbi_table1 import NBBIResult
 
 
 def plot_cycle(

@@ -11,7 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._results import RESULTS
-from ..identification.recursive_pl import dead_zone_rule, preload_rule, symmetric_rule
+from ..identification.seed001 import dead_zone_rule, preload_rule, symmetric_rule
 from .backlash_path import BacklashPathParametrisation
 from .backlash_start import initial_backlash_theta
 from .crlb import cramer_rao_bound

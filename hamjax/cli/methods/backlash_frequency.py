@@ -1,19 +1,11 @@
 """Seed 000 example: NBBI + FGI on G(s) = (s-10)/(s+1)^2 (Figs. 5, 6 and a Bode plot)."""
 
 import argparse
-import math
 from pathlib import Path
 
-import jax.numpy as jnp
 import jax.random as jr
-import numpy as np
 
-from ... import models as hm, signals, simulation
-from ...identification.fgi import identify_fgi
-from ...identification.nbbi import check_assumptions, identify_nbbi
-from ...internal.backlash_shapes import cycle_points
-from ...internal.defaults import seed000_plant
-from ...io import write_json
+from ...papers.seed000.fig6_example import run_example
 from .._common import float_list, positive_float, positive_int
 
 
@@ -60,120 +52,3 @@ def reproduce(args: argparse.Namespace) -> int:
         f"{summary['fgi']['n_points']} points"
     )
     return 0
-
-
-def run(key, out: Path) -> list[tuple[str, str]]:
-    """Demo section (`hamjax demo`): the defaults of `reproduce`."""
-    return run_example(
-        key, out, noise=0.5, hold=40.0, omegas=[0.05, 0.2, 0.6, 2.0], periods=20
-    )[1]
-
-
-def _borders(nonlinearity):
-    """(f_a, f_d) of the normalised backlash, in output units, for the figure."""
-    gain, inner = 1.0, nonlinearity
-    if hasattr(inner, "gain") and hasattr(inner, "inner"):
-        gain, inner = inner.gain, inner.inner
-    return (
-        lambda v: gain * inner.ascending(jnp.asarray(v)),
-        lambda v: gain * inner.descending(jnp.asarray(v)),
-    )
-
-
-def run_example(key, out: Path, *, noise, hold, omegas, periods):
-    """Simulate Table 1 and Table 2 on the Fig. 6 plant; write figures and JSON."""
-    import matplotlib.pyplot as plt
-
-    from ...plotting.backlash import plot_bode, plot_cycle, plot_nbbi_experiment
-
-    nbbi_key, fgi_key = jr.split(key)
-    plant, levels, dt, _ = seed000_plant()  # normalised: G(0) = 1 by (kF, G/k)
-    check_assumptions(plant.linear)
-    levels = np.asarray(levels)
-    raw_G = hm.ContinuousTransferFunction([1.0, -10.0], [1.0, 2.0, 1.0])
-
-    # Table 1: initialisation (3) + staircase (4a-b), noisy output (Fig. 6).
-    _, v0 = signals.initialisation_step(levels, duration=hold, dt=dt)
-    _, v1 = signals.nbbi_staircase(levels, hold=hold, dt=dt)
-    v = jnp.concatenate([v0, v1])
-    t = jnp.arange(v.shape[0]) * dt
-    w = simulation.simulate(plant, v, dt=dt)
-    y = hm.add_noise(nbbi_key, w, hm.WhiteNoise(noise))
-    start = v0.shape[0]
-    plain = identify_nbbi(y, levels, hold=hold, dt=dt, start=start)
-    settled = identify_nbbi(y, levels, hold=hold, dt=dt, start=start, discard=hold / 2)
-    truth = np.asarray(cycle_points(plant.nonlinearity, levels))
-
-    made = []
-    fig = plot_nbbi_experiment(t, v, y, w=w)
-    fig.savefig(out / "fig6_nbbi_experiment.png", dpi=110)
-    made.append(("fig6_nbbi_experiment.png", "input (3)+(4a-b), noisy output (Fig. 6)"))
-    fig = plot_cycle(
-        settled,
-        borders=_borders(plant.nonlinearity),
-        true_values=truth,
-        title="NBBI points, settled average (Fig. 5; k = G(0) = -10)",
-    )
-    fig.savefig(out / "fig5_cycle_points.png", dpi=110)
-    made.append(("fig5_cycle_points.png", "limit cycle with NBBI points (Fig. 5)"))
-    plt.close("all")
-
-    # Table 2 at each omega (Remark 2a), u reconstructed from the NBBI points.
-    results, entries = [], []
-    for i, omega in enumerate(omegas):
-        P, used = signals.fgi_period_samples(float(omega), dt, len(levels))
-        transient = math.ceil(hold / (P * dt))
-        _, vf = signals.periodic_staircase(
-            levels, period_samples=P, periods=transient + periods, dt=dt
-        )
-        vf = jnp.concatenate([v0, vf])
-        wf = simulation.simulate(plant, vf, dt=dt)
-        yf = hm.add_noise(jr.fold_in(fgi_key, i), wf, hm.WhiteNoise(noise))
-        res = identify_fgi(
-            yf,
-            settled.cycle_values,
-            period_samples=P,
-            periods=periods,
-            dt=dt,
-            start=v0.shape[0] + transient * P,
-            cycle_stderr=settled.uncertainty,
-        )
-        results.append(res)
-        for e in res.frequency_response():
-            g = complex(np.asarray(raw_G.frequency_response(e["omega"])).item()) / -10.0
-            e["true_re"], e["true_im"] = g.real, g.imag
-            e["abs_error"] = abs(complex(e["re"], e["im"]) - g)
-            entries.append(e)
-    fig = plot_bode(results, linear=plant.linear)
-    fig.savefig(out / "bode_fgi.png", dpi=110)
-    made.append(("bode_fgi.png", "Bode plot of G-hat (FGI) against G"))
-    plt.close("all")
-
-    summary = {
-        "plant": "G(s) = (s-10)/(s+1)^2 normalised by k = G(0) = -10; n = 4",
-        "levels": levels.tolist(),
-        "dt": dt,
-        "hold": hold,
-        "noise_std": noise,
-        "nbbi": {
-            "true_cycle": truth.tolist(),
-            "plain": np.asarray(plain.cycle_values).tolist(),
-            "settled": np.asarray(settled.cycle_values).tolist(),
-            "stderr": np.asarray(settled.stderr).tolist(),
-            "max_abs_error_plain": float(np.max(np.abs(plain.cycle_values - truth))),
-            "max_abs_error_settled": float(
-                np.max(np.abs(settled.cycle_values - truth))
-            ),
-        },
-        "fgi": {
-            "periods": periods,
-            "frequency_response": entries,
-            "n_points": len(entries),
-            "max_abs_error": max(
-                (e["abs_error"] for e in entries), default=float("nan")
-            ),
-        },
-    }
-    write_json(out / "backlash_frequency.json", summary)
-    made.append(("backlash_frequency.json", "estimates, truth and errors"))
-    return summary, made

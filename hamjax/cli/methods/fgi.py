@@ -9,7 +9,7 @@ import numpy as np
 
 from ..._errors import UserInputError
 from ..._results import RESULTS
-from ...identification.fgi import identify_fgi
+from ...identification.seed000.fgi_table2 import identify_fgi
 from ...io import read_data, read_design, read_json, write_csv, write_json
 from ...signals import fgi_period_samples, initialisation_step, periodic_staircase
 from .._common import positive_float, positive_int

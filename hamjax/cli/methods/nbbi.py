@@ -8,7 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..._errors import UserInputError
-from ...identification.nbbi import identify_nbbi, narrow_message
+from ...identification.seed000.nbbi_table1 import identify_nbbi, narrow_message
 from ...io import read_data, read_design, write_csv, write_json
 from ...signals import initialisation_step, nbbi_staircase
 from .._common import float_list, positive_float

@@ -3,7 +3,7 @@
 `hamjax experiment recursive-pl` writes experiment.json + input.csv,
 `hamjax identify recursive-pl DIR` writes result.json (contract
 `contracts/experiments.md`), `hamjax reproduce recursive-pl --out DIR` reproduces
-Section V.C of Giri, Rochdi, Chaoui (Fig. 3a/3b analogues + numbers).
+Section V.C of Giri, Rochdi, Chaoui (`hamjax/papers/seed001/section_vc.py`).
 """
 
 import argparse
@@ -15,13 +15,13 @@ import numpy as np
 
 from ..._errors import UserInputError
 from ..._results import RESULTS
-from ...identification.recursive_pl import (
+from ...identification.seed001 import (
     STRUCTURES,
     check_levels,
     identify_recursive_pl,
-    recover_history,
 )
 from ...io import read_data, read_design, write_csv, write_json
+from ...io.results import recursive_pl_result_dict
 from ...signals import pe_impulse_sequence
 from .._common import float_list, positive_float, positive_int
 
@@ -150,7 +150,7 @@ def identify(args: argparse.Namespace) -> int:
     code = res.result
     if code in (RESULTS.nonfinite, RESULTS.not_exciting):
         raise UserInputError(f"{folder / 'data.csv'}: {RESULTS[code]}")
-    result = result_dict(res, rho=args.rho, estimator=args.estimator)
+    result = recursive_pl_result_dict(res, rho=args.rho, estimator=args.estimator)
     # The closed form is written first, so a failing refinement loses nothing.
     write_json(folder / "result.json", result)
     print(f"wrote {folder / 'result.json'}")
@@ -178,45 +178,6 @@ def identify(args: argparse.Namespace) -> int:
     return 0
 
 
-def result_dict(res, *, rho: float, estimator: str) -> dict:
-    """result.json of the contract from a `RecursivePLResult`."""
-    e = res.estimate
-    named = res.structure is not None
-
-    def num(x):
-        return float(x) if named else None
-
-    levels = np.asarray(res.levels)
-    return {
-        "method": "recursive-pl",
-        "a": np.asarray(e.a).tolist(),
-        "b": np.asarray(e.b).tolist(),
-        "points": [
-            [float(vj), float(fj)] for vj, fj in zip(levels, e.points, strict=True)
-        ],
-        "k1": float(e.k1),
-        "k2": float(e.k2),
-        "h1": float(e.h1),
-        "h2": float(e.h2),
-        "d1": num(e.d1),
-        "d2": num(e.d2),
-        "l1": num(e.l1),
-        "l2": num(e.l2),
-        "structure": res.structure,
-        "consistent": bool(e.consistent),
-        "result": RESULTS[res.result] or "successful",
-        "theta": np.asarray(res.theta).tolist(),
-        "singular_values": np.asarray(e.singular_values).tolist(),
-        "excitation": float(res.stats["excitation"]),
-        "residual_rms": float(res.stats["residual_rms"]),
-        "estimator": estimator,
-        "rho": rho,
-        "note": "theta ordered as (3.8c): a1..an, mu_11..mu_n1, ..., mu_14..mu_n4; b "
-        "normalised by (3.10) (sum b_i^2 = 1, first largest-magnitude entry > 0), "
-        "points/k/h/l in that scale; d1, d2 signed (Fig. 2)",
-    }
-
-
 # ----------------------------------------------------------------------------- reproduce
 
 
@@ -234,107 +195,11 @@ def reproduce(args: argparse.Namespace) -> int:
     import matplotlib
 
     matplotlib.use("Agg")
-    from ...plotting.recursive_pl import plot_convergence, plot_fig3a, plot_fig3b
+    from ...papers.seed001.section_vc import write_section_vc
 
-    summary, res, case = reproduce_section_vc(periods=args.periods)
     args.out.mkdir(parents=True, exist_ok=True)
-    t = np.arange(res.history.shape[0])
-    hist = recover_history(res)
-    plot_fig3a(t, res.history, case.theta_star()).savefig(
-        args.out / "fig3a.png", dpi=120
-    )
-    plot_fig3b(t, hist, case).savefig(args.out / "fig3b.png", dpi=120)
-    plot_convergence(t, res.history, hist, case).savefig(
-        args.out / "convergence.png", dpi=120
-    )
-    write_json(args.out / "reproduce.json", summary)
-    print(f"wrote fig3a.png, fig3b.png, convergence.png, reproduce.json to {args.out}")
+    summary, made = write_section_vc(args.out, periods=args.periods)
+    print(f"wrote {', '.join(name for name, _ in made)} to {args.out}")
     for line in summary["headline"]:
         print(line)
     return 0
-
-
-def samples_to_tolerance(errors: np.ndarray, tol: float) -> int | None:
-    """Samples after which `errors[t] <= tol` for good (None if never)."""
-    above = np.nonzero(np.asarray(errors) > tol)[0]
-    if above.size == 0:
-        return 0
-    last = int(above[-1])
-    return None if last == errors.shape[0] - 1 else last + 1
-
-
-def reproduce_section_vc(*, periods: int = 2000):
-    """Section V.C noise-free: Theta*, the gradient run and its convergence times.
-
-    **Returns:** `(summary dict, RecursivePLResult, RecursivePLCase)`.
-    """
-    from ...internal.recursive_pl_plants import paper_case
-    from ...simulation import simulate
-
-    case = paper_case()
-    _, v = pe_impulse_sequence(case.levels, order=2, periods=periods)
-    y = simulate(case.plant(), v)
-    res = identify_recursive_pl(v, y, levels=case.levels, order=2)
-    theta_star = np.asarray(case.theta_star())
-    printed = [0.56, -1.5, 1.66, -3.33, 1.33, -2.66, 1, -2, 1, -2]
-    in_print_order = np.r_[theta_star[1], theta_star[0], theta_star[2:]]
-    theta_err = np.abs(np.asarray(res.history) - theta_star).max(axis=1)
-    hist = recover_history(res)
-    truth = case.normalised_truth()
-    phys = np.max(
-        np.stack(
-            [
-                np.abs(np.asarray(getattr(hist, k)) - np.asarray(truth[k]))
-                .reshape(theta_err.shape[0], -1)
-                .max(axis=1)
-                for k in ("a", "b", "d", "points", "k1", "k2", "h1", "h2")
-            ]
-        ),
-        axis=0,
-    )
-    counts = {
-        f"{name}_{tol:g}": samples_to_tolerance(err, tol)
-        for name, err in (("theta", theta_err), ("physical", phys))
-        for tol in (1e-3, 1e-6)
-    }
-    e = res.estimate
-    # What each rule of (3.18) makes of the paper's (non-dead-zone, non-preload,
-    # non-symmetric) map: the four points cannot identify D and L here.
-    from ...identification.recursive_pl import recover_parameters
-
-    rules = {}
-    for s in STRUCTURES:
-        r = recover_parameters(res.theta, levels=case.levels, order=2, structure=s)
-        rules[s] = {k: float(getattr(r, k)) for k in ("d1", "d2", "l1", "l2")} | {
-            "consistent": bool(r.consistent)
-        }
-    summary = {
-        "plant": "A = 1 - 1.5 q^-1 + 0.56 q^-2, B = q^-1 - 2 q^-2, K = (1, 2), "
-        "D = (1, -2), L = (1, -2), V = (-6, -3, 3, 6), z = 0",
-        "theta_star": theta_star.tolist(),
-        "theta_star_in_paper_print_order": in_print_order.tolist(),
-        "theta_star_paper_print": printed,
-        "max_abs_difference_to_print": float(np.max(np.abs(in_print_order - printed))),
-        "samples": int(y.shape[0]),
-        "samples_to_tolerance": counts,
-        "final_theta_error": float(theta_err[-1]),
-        "estimate": {
-            "a": np.asarray(e.a).tolist(),
-            "b": np.asarray(e.b).tolist(),
-            "points": np.asarray(e.points).tolist(),
-            "k1": float(e.k1),
-            "k2": float(e.k2),
-            "h1": float(e.h1),
-            "h2": float(e.h2),
-        },
-        "truth_normalised_3_10": {k: np.asarray(x).tolist() for k, x in truth.items()},
-        "rules_3_18_on_paper_map": rules,
-    }
-    summary["headline"] = [
-        "theta* (paper print order a2, a1, mu..): "
-        + " ".join(f"{x:.4g}" for x in in_print_order),
-        f"samples to 1e-3 / 1e-6 (max |theta - theta*|): {counts['theta_0.001']} / "
-        f"{counts['theta_1e-06']}; physical (a, b, F(Vj), K, H): "
-        f"{counts['physical_0.001']} / {counts['physical_1e-06']}",
-    ]
-    return summary, res, case

@@ -1,6 +1,0 @@
-"""Demo section: diagnosis of a built-in case whose saturation is withheld."""
-
-from ..gap_cases import run_demo as run
-
-
-__all__ = ["run"]

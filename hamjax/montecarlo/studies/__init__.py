@@ -1,1 +1,0 @@
-"""Registered Monte Carlo studies: one module per study, found by `discover_studies`."""

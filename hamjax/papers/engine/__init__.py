@@ -1,0 +1,1 @@
+"""Studies of the Monte Carlo engine itself (no paper): throughput."""

@@ -1,0 +1,1 @@
+"""Registered studies of the engine (`hamjax study --list`)."""

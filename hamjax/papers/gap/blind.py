@@ -1,0 +1,580 @@
+"""Blind benchmark: withheld-effect gap cases (generation) and their scoring.
+
+A case draws a nominal plant (discrete or continuous linear block of order 1-3;
+identity, piecewise-linear or tabulated map), two excitations (random staircase,
+multisine or filtered noise) and one effect of the catalogue with a random
+magnitude; the measured output is simulated from the *true* plant (nominal +
+effect) and noise, independently of the diagnosis code (NumPy recursions, the
+linear block by its exact ZOH state space). The truth goes to `DIR/truth.json`,
+never into a case folder.
+
+Modes:
+
+- `exact`: the nominal model is the true plant without the effect; effects in the
+  textbook form of the contract; effect RMS 1.5-20 x the noise std; 2000 samples.
+- `realistic`: in every case the nominal parameters are off by an amount whose
+  output effect is up to 0.1 x the noise std (what a careful identification
+  leaves, below what anyone would call a mismatch); effect shapes outside the
+  catalogue forms (soft saturation, asymmetric dead zone, backlash with
+  stick-slip, fractional delay, second-order lag, smooth preload, tanh/cubic
+  sensors, random-walk drift); effect RMS from 0.3 x the noise std up; records of
+  1000-4000 samples.
+"""
+
+import math
+from pathlib import Path
+
+import jax.random as jr
+import numpy as np
+
+from ...diagnosis.attribute import DETERMINISTIC_NAMES, NOISE_NAMES
+from ...io import model_to_dict, read_json, write_csv, write_json
+from ...models import (
+    ContinuousTransferFunction,
+    DiscreteTransferFunction,
+    Hammerstein,
+    Identity,
+    PiecewiseLinear,
+    Tabulated,
+)
+
+
+# The contract's names, in its order: none, the deterministic effects, the noise ones.
+EFFECTS = ("none", *DETERMINISTIC_NAMES, *NOISE_NAMES)
+DETERMINISTIC = DETERMINISTIC_NAMES
+
+
+class _Draw:
+    """Named uniform draws from one key (each draw folds in a counter)."""
+
+    def __init__(self, key):
+        self.key, self.n = key, 0
+
+    def _next(self):
+        self.n += 1
+        return jr.fold_in(self.key, self.n)
+
+    def uniform(self, lo: float, hi: float) -> float:
+        return float(jr.uniform(self._next(), (), minval=lo, maxval=hi))
+
+    def log_uniform(self, lo: float, hi: float) -> float:
+        return math.exp(self.uniform(math.log(lo), math.log(hi)))
+
+    def integer(self, lo: int, hi: int) -> int:  # inclusive
+        return int(jr.randint(self._next(), (), lo, hi + 1))
+
+    def choice(self, options):
+        return options[self.integer(0, len(options) - 1)]
+
+    def normal(self, shape) -> np.ndarray:
+        return np.asarray(jr.normal(self._next(), shape))
+
+    def uniform_array(self, shape, lo, hi) -> np.ndarray:
+        return np.asarray(jr.uniform(self._next(), shape, minval=lo, maxval=hi))
+
+
+# ---------------------------------------------------------------- plants -----
+
+
+def _draw_linear(d: _Draw, dt: float):
+    order = d.integer(1, 3)
+    if d.uniform(0, 1) < 0.5:  # continuous: time constants of 6-40 samples
+        w = [1 / (dt * d.uniform(6, 40)) for _ in range(order)]
+        den = np.array([1.0])
+        if order >= 2 and d.uniform(0, 1) < 0.5:
+            zeta = d.uniform(0.4, 0.9)
+            den = np.polymul(den, [1.0, 2 * zeta * w[0], w[0] ** 2])
+            rest = w[2:]
+        else:
+            den = np.polymul(den, [1.0, w[0]])
+            rest = w[1:]
+        for wi in rest:
+            den = np.polymul(den, [1.0, wi])
+        gain = d.uniform(0.5, 2.0)
+        return ContinuousTransferFunction([gain * den[-1]], den)
+    poles = [d.uniform(0.5, 0.93) for _ in range(order)]
+    a = np.real(np.poly(poles))
+    b = np.r_[0.0, np.ones(1)]
+    if order >= 2 and d.uniform(0, 1) < 0.5:
+        b = np.r_[0.0, 1.0, d.uniform(-0.5, 0.5)]
+    b = b * d.uniform(0.5, 2.0) * a.sum() / b.sum()
+    return DiscreteTransferFunction(b, a, dt)
+
+
+def _draw_nonlinearity(d: _Draw, kinds=("identity", "piecewise_linear", "tabulated")):
+    kind = d.choice(kinds)
+    if kind == "identity":
+        return Identity()
+    if kind == "piecewise_linear":
+        d1, d2 = d.uniform(0.1, 0.3), -d.uniform(0.1, 0.3)
+        return PiecewiseLinear(
+            k1=d.uniform(0.6, 1.6),
+            k2=d.uniform(0.6, 1.6),
+            d1=d1,
+            d2=d2,
+            l1=d.uniform(0.0, 0.2),
+            l2=-d.uniform(0.0, 0.2),
+        )
+    grid = np.linspace(-1.2, 1.2, 9)
+    slopes = d.uniform_array((8,), 0.4, 1.6)
+    u = np.r_[0.0, np.cumsum(slopes * np.diff(grid))]
+    u = u - np.interp(0.0, grid, u)
+    return Tabulated(grid, u)
+
+
+def _static(nl, v: np.ndarray) -> np.ndarray:
+    if isinstance(nl, Identity):
+        return v.copy()
+    if isinstance(nl, PiecewiseLinear):
+        k1, k2, d1, d2, l1, l2 = (
+            float(getattr(nl, k)) for k in ("k1", "k2", "d1", "d2", "l1", "l2")
+        )
+        return np.where(
+            v > d1, k1 * (v - d1) + l1, np.where(v < d2, k2 * (v - d2) + l2, 0.0)
+        )
+    return np.interp(v, np.asarray(nl.v), np.asarray(nl.u))
+
+
+def _lsim(linear, u: np.ndarray, dt: float) -> np.ndarray:
+    """Response from rest, NumPy (exact ZOH state space for continuous blocks)."""
+    if isinstance(linear, DiscreteTransferFunction):
+        return _lfilter(np.asarray(linear.b), np.asarray(linear.a), u)
+    ss = linear.discretise(dt)
+    A, B, C, D = (np.asarray(x) for x in (ss.A, ss.B, ss.C, ss.D))
+    x = np.zeros(A.shape[0])
+    y = np.empty_like(u)
+    for k, uk in enumerate(u):
+        y[k] = C[0] @ x + D[0, 0] * uk
+        x = A @ x + B[:, 0] * uk
+    return y
+
+
+def _lfilter(b, a, u):
+    n = max(len(a), len(b))
+    b = np.r_[b, np.zeros(n - len(b))]
+    a = np.r_[a, np.zeros(n - len(a))]
+    z = np.zeros(n - 1)
+    y = np.empty_like(u)
+    for k, uk in enumerate(u):
+        yk = b[0] * uk + (z[0] if n > 1 else 0.0)
+        if n > 1:
+            z = np.r_[z[1:], 0.0] + b[1:] * uk - a[1:] * yk
+        y[k] = yk
+    return y
+
+
+# ------------------------------------------------------------- excitation ----
+
+
+def _excitation(d: _Draw, n: int, dt: float) -> np.ndarray:
+    kind = d.choice(("staircase", "staircase", "multisine", "filtered_noise"))
+    if kind == "staircase":
+        hold = d.integer(20, 60)
+        levels = d.uniform_array((n // hold + 1,), -1.0, 1.0)
+        return np.repeat(levels, hold)[:n]
+    t = np.arange(n) * dt
+    if kind == "multisine":
+        k = np.arange(1, 9)
+        f0 = 1 / (n * dt) * d.integer(2, 6)
+        ph = d.uniform_array((8,), 0, 2 * np.pi)
+        v = np.sum(
+            np.sin(2 * np.pi * f0 * k[:, None] * t[None, :] + ph[:, None]), axis=0
+        )
+    else:
+        e = d.normal((n,))
+        p = d.uniform(0.8, 0.95)
+        v = _lfilter(np.array([1 - p]), np.array([1.0, -p]), e)
+    return v / np.max(np.abs(v))
+
+
+# ---------------------------------------------------------------- effects ----
+
+
+def _play(v, c):
+    x, out = v[0], np.empty_like(v)
+    for k, vk in enumerate(v):
+        x = min(max(x, vk - c / 2), vk + c / 2)
+        out[k] = x
+    return out
+
+
+def _rate(v, step):
+    x, out = v[0], np.empty_like(v)
+    for k, vk in enumerate(v):
+        x = x + min(max(vk - x, -step), step)
+        out[k] = x
+    return out
+
+
+def _shift(v, tau):
+    whole = int(math.floor(tau))
+    frac = tau - whole
+    idx = np.maximum(np.arange(v.shape[0]) - whole, 0)
+    idx2 = np.maximum(idx - 1, 0)
+    return (1 - frac) * v[idx] + frac * v[idx2]
+
+
+class _Truth:
+    """The true plant: nominal + one effect, as NumPy functions of the input."""
+
+    def __init__(self, nominal, effect, params, realistic):
+        self.nominal, self.effect, self.params, self.realistic = (
+            nominal,
+            effect,
+            params,
+            realistic,
+        )
+
+    def output(self, v, dt, linear=None):
+        e, p = self.effect, self.params
+        lin = linear or self.nominal.linear
+        x = v
+        if e == "backlash":
+            x = _play(v, p["c"])
+            if (
+                self.realistic
+            ):  # stick-slip: the output sticks until the force exceeds a breakaway
+                x = x + p["stick"] * np.sign(np.diff(x, prepend=x[0]))
+        elif e == "dead_zone":
+            x = v - np.clip(v, -p["w_lo"], p["w_hi"])
+        elif e == "rate_limit":
+            x = _rate(v, p["r"] * dt)
+        elif e == "time_delay":
+            x = _shift(v, p["tau"])
+        u = _static(self.nominal.nonlinearity, x)
+        if e == "preload":
+            u = u + p["c"] * (np.tanh(x / p["eps"]) if self.realistic else np.sign(x))
+        elif e == "saturation":
+            if self.realistic:  # soft saturation: a tanh knee of the same limits
+                mid, half = (p["hi"] + p["lo"]) / 2, (p["hi"] - p["lo"]) / 2
+                u = mid + half * np.tanh((u - mid) / half)
+            else:
+                u = np.clip(u, p["lo"], p["hi"])
+        elif e == "extra_pole":
+            u = _lfilter(np.array([1 - p["p"]]), np.array([1.0, -p["p"]]), u)
+            if self.realistic:
+                u = _lfilter(np.array([1 - p["p2"]]), np.array([1.0, -p["p2"]]), u)
+        w = _lsim(lin, u, dt)
+        if e == "output_nonlinearity":
+            w = self._output_map(w)
+        return w
+
+    def _output_map(self, w):
+        p = self.params
+        shape, W = p["shape"], p["scale"]
+        if shape == "quadratic":
+            return w + p["a"] * w**2 / W
+        if shape == "cubic":
+            return w - p["a"] * w**3 / W**2
+        if shape == "saturation":
+            return np.clip(w, p["lo"], p["hi"])
+        if shape == "tanh":
+            return W * np.tanh(w / W) * p["a"] + (1 - p["a"]) * w
+        return w - np.clip(w, -p["b"], p["b"])  # dead band
+
+
+def _perturb_linear(linear, d: _Draw, size: float):
+    """The same structure with poles and gain moved by relative amounts ~ `size`."""
+    g = 1 + size * d.uniform(-1, 1)
+    if isinstance(linear, ContinuousTransferFunction):
+        poles = np.roots(np.asarray(linear.den))
+        poles = poles * (1 + size * d.uniform(-1, 1))
+        den = np.real(np.poly(poles)) * float(linear.den[0])
+        num = np.asarray(linear.num) * g * (den[-1] / float(linear.den[-1]))
+        return ContinuousTransferFunction(num, den)
+    a = np.asarray(linear.a)
+    poles = np.roots(a)
+    poles = np.clip(np.abs(poles) * (1 + size * d.uniform(-1, 1)), 0, 0.97) * np.exp(
+        1j * np.angle(poles)
+    )
+    a2 = np.real(np.poly(poles))
+    b = np.asarray(linear.b) * g * a2.sum() / a.sum()
+    return DiscreteTransferFunction(b, a2, linear.dt)
+
+
+def _perturb_nl(nl, d: _Draw, size: float):
+    if isinstance(nl, PiecewiseLinear):
+        vals = {k: float(getattr(nl, k)) for k in ("k1", "k2", "d1", "d2", "l1", "l2")}
+        vals = {
+            k: x + size * d.uniform(-1, 1) * (abs(x) + 0.1) for k, x in vals.items()
+        }
+        vals["d1"], vals["d2"] = max(vals["d1"], 0.0), min(vals["d2"], 0.0)
+        return PiecewiseLinear(**vals)
+    return nl
+
+
+def _rms(x):
+    return float(np.sqrt(np.mean(np.square(x))))
+
+
+def make_case(key, *, realism: str = "exact") -> dict:
+    """One withheld-effect case.
+
+    An effect that does not show in both records (say an output saturation the
+    validation output never reaches) is no effect at all: it is drawn again, from
+    keys folded from `key`, so every case keeps a known, visible effect.
+
+    **Returns:** `{"model": model.json dict, "estimation": {t, v, y},
+    "validation": {...}, "truth": {...}}` (NumPy arrays).
+    """
+    if realism not in ("exact", "realistic"):
+        raise ValueError(f"realism must be 'exact' or 'realistic'; got {realism!r}")
+    for attempt in range(100):
+        case = _draw_case(
+            key if attempt == 0 else jr.fold_in(key, 104729 + attempt), realism
+        )
+        if case is not None:
+            return case
+    raise RuntimeError("no visible effect in 100 draws")  # pragma: no cover
+
+
+def _draw_case(key, realism: str) -> dict | None:
+    realistic = realism == "realistic"
+    d = _Draw(key)
+    dt = 0.05
+    effect = d.choice(EFFECTS)
+    n = d.integer(1000, 4000) if realistic else 2000
+    kinds = (
+        ("identity", "tabulated")
+        if effect in ("dead_zone", "preload")
+        else (
+            "identity",
+            "piecewise_linear",
+            "tabulated",
+        )
+    )
+    nominal = Hammerstein(_draw_nonlinearity(d, kinds), _draw_linear(d, dt))
+    v_est, v_val = _excitation(d, n, dt), _excitation(d, n, dt)
+    if effect in ("backlash", "rate_limit"):  # memory needs steps to be seen
+        hold = d.integer(20, 60)
+        v_est = np.repeat(d.uniform_array((n // hold + 1,), -1, 1), hold)[:n]
+        v_val = np.repeat(d.uniform_array((n // hold + 1,), -1, 1), hold)[:n]
+    w_nom_est = _lsim(nominal.linear, _static(nominal.nonlinearity, v_est), dt)
+    u_est = _static(nominal.nonlinearity, v_est)
+    W = max(np.quantile(np.abs(w_nom_est), 0.98), 1e-9)
+    params: dict = {}
+    truth_plant = nominal
+    if effect == "parameter_mismatch":
+        size = d.uniform(0.1, 0.3)
+        truth_plant = Hammerstein(
+            _perturb_nl(nominal.nonlinearity, d, size),
+            _perturb_linear(nominal.linear, d, size),
+        )
+        params["relative_size"] = size
+    elif effect == "backlash":
+        params["c"] = d.uniform(0.05, 0.3) * np.ptp(v_est)
+        params["stick"] = d.uniform(0.0, 0.05) * params["c"] if realistic else 0.0
+    elif effect == "dead_zone":
+        w = d.uniform(0.05, 0.3)
+        params["w_lo"] = w
+        params["w_hi"] = w * (d.uniform(0.5, 1.5) if realistic else 1.0)
+    elif effect == "saturation":
+        lo = float(np.quantile(u_est, d.uniform(0.03, 0.3)))
+        hi = float(np.quantile(u_est, d.uniform(0.7, 0.97)))
+        # a map with a wide flat part (a dead band of F) can put both quantiles at
+        # the same level, i.e. no input left at all: keep a band of 0.2 std(u)
+        band = 0.2 * float(np.std(u_est))
+        if hi - lo < band:
+            lo, hi = (lo + hi - band) / 2, (lo + hi + band) / 2
+        params["lo"], params["hi"] = lo, hi
+    elif effect == "preload":
+        params["c"] = d.uniform(0.05, 0.3) * float(np.std(u_est))
+        params["eps"] = d.uniform(0.01, 0.05)
+    elif effect == "rate_limit":
+        steps = np.abs(np.diff(v_est))
+        params["r"] = d.uniform(0.03, 0.3) * float(steps.max()) / dt
+    elif effect == "time_delay":
+        params["tau"] = d.integer(1, 5) + (d.uniform(-0.3, 0.3) if realistic else 0.0)
+    elif effect == "extra_pole":
+        params["p"] = d.uniform(0.5, 0.9)
+        params["p2"] = d.uniform(0.0, 0.5) if realistic else 0.0
+    elif effect == "output_nonlinearity":
+        shapes = ("quadratic", "saturation", "dead_band") + (
+            ("cubic", "tanh") if realistic else ()
+        )
+        params["shape"] = d.choice(shapes)
+        params["scale"] = W
+        params["a"] = d.uniform(0.1, 0.3)
+        params["lo"] = float(np.quantile(w_nom_est, d.uniform(0.03, 0.2)))
+        params["hi"] = float(np.quantile(w_nom_est, d.uniform(0.8, 0.97)))
+        params["b"] = d.uniform(0.05, 0.2) * W
+    truth = _Truth(
+        truth_plant,
+        effect if effect != "parameter_mismatch" else "none",
+        params,
+        realistic,
+    )
+    ws = {
+        name: truth.output(v, dt)
+        for name, v in (("estimation", v_est), ("validation", v_val))
+    }
+    w_nominal = {
+        name: _lsim(nominal.linear, _static(nominal.nonlinearity, v), dt)
+        for name, v in (("estimation", v_est), ("validation", v_val))
+    }
+    # the effect must show in both records: the smaller of the two sets the scale
+    effect_rms = min(
+        _rms(ws[name] - w_nominal[name]) for name in ("estimation", "validation")
+    )
+    if effect in DETERMINISTIC and not effect_rms > 1e-6 * _rms(
+        w_nominal["validation"]
+    ):
+        return None
+    if effect in DETERMINISTIC:
+        ratio = d.log_uniform(0.3, 10.0) if realistic else d.log_uniform(1.5, 20.0)
+        sigma = effect_rms / ratio
+    else:
+        sigma = d.uniform(0.01, 0.05) * float(np.std(w_nominal["estimation"]))
+    model_plant = nominal
+    if realistic:  # nominal error in every case, output effect <= 0.1 sigma
+        kp = jr.fold_in(key, 7919)  # the same draws twice: the error scales linearly
+        dp = _Draw(kp)
+        trial = Hammerstein(
+            _perturb_nl(nominal.nonlinearity, dp, 0.01),
+            _perturb_linear(nominal.linear, dp, 0.01),
+        )
+        err = _rms(
+            _lsim(trial.linear, _static(trial.nonlinearity, v_est), dt)
+            - w_nominal["estimation"]
+        )
+        target = d.uniform(0.0, 0.1) * sigma
+        size = 0.01 * target / max(err, 1e-300)
+        d2 = _Draw(kp)
+        model_plant = Hammerstein(
+            _perturb_nl(nominal.nonlinearity, d2, size),
+            _perturb_linear(nominal.linear, d2, size),
+        )
+    records = {}
+    for _i, (name, v) in enumerate((("estimation", v_est), ("validation", v_val))):
+        w = ws[name]
+        e = sigma * d.normal((n,))
+        if effect == "drift":
+            t = np.arange(n) * dt
+            if realistic:
+                walk = np.cumsum(d.normal((n,))) * sigma * d.uniform(0.05, 0.2)
+                w = w + walk
+            else:
+                total = d.uniform(3.0, 10.0) * sigma * d.choice((-1.0, 1.0))
+                w = w + total * t / t[-1]
+        elif effect == "coloured_noise":
+            pole = params.setdefault("pole", d.uniform(0.7, 0.95))
+            e = _lfilter(np.array([1.0]), np.array([1.0, -pole]), e) * math.sqrt(
+                1 - pole**2
+            )
+        records[name] = {"t": np.arange(n) * dt, "v": v, "y": w + e}
+    return {
+        "model": model_to_dict(model_plant, dt),
+        "estimation": records["estimation"],
+        "validation": records["validation"],
+        "truth": {
+            "effect": effect,
+            "params": {
+                k: (v if isinstance(v, str) else float(v)) for k, v in params.items()
+            },
+            "noise_std": float(sigma),
+            "effect_rms_over_noise": float(effect_rms / sigma) if sigma > 0 else 0.0,
+            "n_samples": n,
+            "realism": realism,
+        },
+    }
+
+
+def make_cases(key, n_cases: int, out: Path, *, realism: str = "exact") -> dict:
+    """Write `n_cases` case folders under `out` and `out/truth.json`."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    truth = {"realism": realism, "cases": {}}
+    for i in range(n_cases):
+        case = make_case(jr.fold_in(key, i), realism=realism)
+        name = f"case_{i:04d}"
+        folder = out / "cases" / name
+        write_json(folder / "model.json", case["model"])
+        write_csv(folder / "estimation.csv", case["estimation"])
+        write_csv(folder / "validation.csv", case["validation"])
+        truth["cases"][name] = case["truth"]
+    write_json(out / "truth.json", truth)
+    return truth
+
+
+# ---------------------------------------------------------------- scoring ----
+
+
+def score(truth: dict, named: dict, shrinks: dict | None = None) -> dict:
+    """Confusion matrix, accuracy, false alarm on `none`, median shrink.
+
+    **Arguments:** `truth` as in `truth.json`; `named` maps case name -> effect
+    named; `shrinks` maps case name -> `(gap_before, gap_after)` (the shrink is
+    computed against the *true* noise std of the case).
+    """
+    labels = list(EFFECTS) + ["unexplained"]
+    matrix = {t: {p: 0 for p in labels} for t in EFFECTS}
+    correct, total, none_total, none_alarm = 0, 0, 0, 0
+    shrink_values = []
+    missing = []
+    for name, tr in truth["cases"].items():
+        if name not in named:
+            missing.append(name)
+            continue
+        t, p = tr["effect"], named[name]
+        matrix[t][p if p in labels else "unexplained"] += 1
+        total += 1
+        correct += t == p
+        if t == "none":
+            none_total += 1
+            none_alarm += p != "none"
+        if shrinks is not None and t in DETERMINISTIC and name in shrinks:
+            gb, ga = shrinks[name]
+            s = tr["noise_std"]
+            if gb > s:
+                shrink_values.append((gb - ga) / (gb - s))
+    return {
+        "n_cases": total,
+        "missing": missing,
+        "accuracy": correct / total if total else float("nan"),
+        "false_alarm_none": none_alarm / none_total if none_total else float("nan"),
+        "n_none": none_total,
+        "median_shrink_deterministic": float(np.median(shrink_values))
+        if shrink_values
+        else float("nan"),
+        "confusion": matrix,
+    }
+
+
+def score_folder(folder: Path, results: Path) -> dict:
+    """Score `results/<case>/diagnosis.json` against `folder/truth.json`."""
+    from ..._errors import UserInputError
+
+    truth_path = Path(folder) / "truth.json"
+    if not truth_path.is_file():
+        raise UserInputError(
+            f"{truth_path}: not found (is {folder} a blind-benchmark folder?)"
+        )
+    truth = read_json(truth_path)
+    named, shrinks = {}, {}
+    for name in truth["cases"]:
+        p = Path(results) / name / "diagnosis.json"
+        if p.is_file():
+            r = read_json(p)
+            named[name] = r["effect"]
+            shrinks[name] = (r["gap_before"], r["gap_after"])
+    return score(truth, named, shrinks)
+
+
+def format_score(s: dict) -> str:
+    """The confusion matrix and the headline numbers as text."""
+    labels = list(EFFECTS) + ["unexplained"]
+    short = [x[:6] for x in labels]
+    lines = ["truth \\ named".ljust(20) + " ".join(f"{x:>6}" for x in short)]
+    for t in EFFECTS:
+        row = s["confusion"][t]
+        if sum(row.values()) == 0:
+            continue
+        lines.append(t.ljust(20) + " ".join(f"{row[p]:>6}" for p in labels))
+    lines.append(
+        f"cases {s['n_cases']}  accuracy {s['accuracy']:.3f}  false alarm on none "
+        f"{s['false_alarm_none']:.3f} (of {s['n_none']})  median shrink (deterministic) "
+        f"{s['median_shrink_deterministic']:.3f}"
+    )
+    if s["missing"]:
+        lines.append(f"missing results: {len(s['missing'])}")
+    return "\n".join(lines)

@@ -1,0 +1,1 @@
+"""Registered studies of the gap diagnosis (`hamjax study --list`)."""

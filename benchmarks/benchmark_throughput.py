@@ -79,7 +79,7 @@ def _workload2_setup(n_samples: int):
     import jax.numpy as jnp
 
     import hamjax as hj
-    from hamjax.identification import recursive_pl as rpl
+    from hamjax.identification import seed001 as rpl
 
     levels = jnp.asarray(LEVELS)
     periods = math.ceil(n_samples / 14)
@@ -101,8 +101,10 @@ def _workload2_trial(n_samples: int, unroll: int):
     import jax.random as jr
     from jaxtyping import Array
 
-    from hamjax.identification import recursive_pl as rpl
-    from hamjax.montecarlo.time_major import normalised_gradient_time_major
+    from hamjax.identification import seed001 as rpl
+    from hamjax.identification.seed001.normalised_gradient_4_1 import (
+        normalised_gradient_time_major,
+    )
 
     v, w, g, theta_star, rho = _workload2_setup(n_samples)
 
@@ -407,12 +409,11 @@ def _batched_fns(workload, samples, unroll, aux):
     import jax.numpy as jnp
 
     import hamjax as hj
-    from hamjax.identification import recursive_pl as rpl
-    from hamjax.montecarlo.time_major import (
+    from hamjax.identification import seed001 as rpl
+    from hamjax.identification.seed001.normalised_gradient_4_1 import (
         normalised_gradient_time_major,
-        output_summary,
-        output_summary_time_major,
     )
+    from hamjax.simulation.time_major import output_summary, output_summary_time_major
 
     if workload == 1:
         plant = _workload1_trial(samples, unroll).plant

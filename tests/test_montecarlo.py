@@ -12,6 +12,9 @@ import scipy.signal
 import scipy.stats
 
 import hamjax as hj
+from hamjax.identification.seed001.normalised_gradient_4_1 import (
+    normalised_gradient_time_major,
+)
 from hamjax.montecarlo import (
     MonteCarloConfig,
     loglog_slope,
@@ -20,11 +23,8 @@ from hamjax.montecarlo import (
     storage,
     summarise,
 )
-from hamjax.montecarlo.time_major import (
-    normalised_gradient_time_major,
-    output_summary,
-)
 from hamjax.papers.engine.studies.simulation_throughput import make_trial
+from hamjax.simulation.time_major import output_summary
 
 
 def _trial(key):

@@ -25,6 +25,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
+from ..models.nonlinearities.piecewise_linear import piecewise_linear_map
 from .effects.backlash import play_step
 from .effects.dead_zone import dead_zone
 from .effects.output_nonlinearity import output_map
@@ -238,10 +239,7 @@ def static_map(
     `table=False` skips the table look-up (exact unless the map is tabulated); a
     traced `table` that is the same for a whole batch skips it at run time.
     """
-    k1, k2, d1, d2, l1, l2 = (p[i] for i in range(6))
-    pl = jnp.where(
-        v > d1, k1 * (v - d1) + l1, jnp.where(v < d2, k2 * (v - d2) + l2, 0.0)
-    )
+    pl = piecewise_linear_map(v, *(p[i] for i in range(6)))
     tab = switch(table, _table, lambda v, *_: jnp.zeros_like(v), v, p, case)
     return jnp.where(
         case.nl_kind == NL_PIECEWISE,

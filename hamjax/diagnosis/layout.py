@@ -14,6 +14,7 @@ from ..models import (
     PiecewiseLinear,
     Tabulated,
 )
+from ..models.nonlinearities.piecewise_linear import piecewise_linear_map
 from .augmented import (
     EFFECT_NEUTRAL,
     EFFECT_SLOTS,
@@ -430,10 +431,7 @@ def _response_numpy(linear, u: np.ndarray, dt: float) -> np.ndarray:
 
 def _static_numpy(nom: Nominal, v: np.ndarray) -> np.ndarray:
     if nom.nl_kind == NL_PIECEWISE:
-        k1, k2, d1, d2, l1, l2 = nom.pl
-        return np.where(
-            v > d1, k1 * (v - d1) + l1, np.where(v < d2, k2 * (v - d2) + l2, 0.0)
-        )
+        return piecewise_linear_map(v, *nom.pl, xp=np)
     if nom.nl_kind == NL_TABULATED:
         return np.interp(v, nom.tab_v, nom.tab_u)
     return np.asarray(v, float)

@@ -17,11 +17,7 @@ def discrete_response(
 
 
 def discrete_stable(a: Float[Array, " n"]) -> Bool[Array, ""]:
-    """All roots of $A(z)$ inside the unit circle (companion-matrix eigenvalues)."""
-    n = a.shape[0]
-    companion = jnp.zeros((n, n)).at[0, :].set(-a)
-    if n > 1:
-        companion = companion.at[1:, :-1].set(jnp.eye(n - 1))
-    return jnp.all(jnp.abs(jnp.linalg.eigvals(companion)) < 1.0) & jnp.all(
-        jnp.isfinite(a)
-    )
+    r"""All roots of $A(z) = 1 + a_1 z^{-1} + \dots$ inside the unit circle (the
+    block's own traced `stable`)."""
+    den = jnp.concatenate([jnp.ones(1), a])
+    return DiscreteTransferFunction(jnp.ones(1), den).stable()

@@ -165,9 +165,8 @@ class BacklashPathParametrisation(AbstractParametrisation):
         return jnp.asarray(physical, dtype=float)
 
     def is_valid(self, theta: Params) -> Bool[Array, ""]:
-        den = self.transfer_function(theta).den
-        roots = jnp.roots(den, strip_zeros=False)
-        return jnp.all(roots.real < 0) & jnp.all(jnp.isfinite(theta))
+        stable = self.transfer_function(theta).stable()
+        return stable & jnp.all(jnp.isfinite(theta))
 
     def paths(self, theta: Params) -> tuple[Array, Array]:
         """`(ascending, descending)` $U$ values: $V_1..V_n$ on $\\mathcal P_a$ and

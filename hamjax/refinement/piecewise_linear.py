@@ -23,6 +23,7 @@ from jaxtyping import Array, ArrayLike, Bool, Float
 
 from .._checks import concrete
 from .._types import Params, Signal
+from ..models.nonlinearities.piecewise_linear import piecewise_linear_map
 from ._discrete import discrete_response, discrete_stable
 from ._parametrisation import AbstractParametrisation
 from .normalisation import normalise_b, sphere_coordinates, sphere_point
@@ -35,11 +36,11 @@ def smoothed_piecewise_linear(
     params: Float[Array, " 6"], v: Signal, width: Float[ArrayLike, ""] | None
 ) -> Signal:
     """Fig. 2's map with its switches smoothed over `width` (exact for `None`)."""
+    if width is None:
+        return piecewise_linear_map(v, *params)
     k1, k2, d1, d2, l1, l2 = params
     upper = k1 * (v - d1) + l1
     lower = k2 * (v - d2) + l2
-    if width is None:
-        return jnp.where(v > d1, upper, jnp.where(v < d2, lower, 0.0))
     return (
         jax.nn.sigmoid((v - d1) / width) * upper
         + jax.nn.sigmoid((d2 - v) / width) * lower

@@ -19,11 +19,11 @@ from ..models import (
 def check_stable(linear: AbstractLinearBlock, what: str = "the linear block") -> None:
     """Raise `ValueError` if a concrete `linear` block is unstable."""
     try:
-        poles = linear.poles()
+        stable = linear.is_stable()
     except ValueError:  # traced coefficients (under jit): nothing to check here
         return
-    if not linear.is_stable():
-        poles = ", ".join(f"{p:.4g}" for p in poles)
+    if not stable:
+        poles = ", ".join(f"{p:.4g}" for p in linear.poles())
         region = (
             "|p| < 1"
             if not isinstance(linear, ContinuousTransferFunction)

@@ -5,6 +5,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float, Int
 
 from ..._types import Signal
+from ...simulation.time_major import check_unroll
 
 
 def normalised_gradient(
@@ -53,12 +54,26 @@ def gradient_step(
 ) -> Float[Array, " p"]:
     r"""One step of (4.1a-b): $\hat\theta(t-1) \mapsto \hat\theta(t)$."""
     e = y_t - phi_t @ theta  # Eq. (4.1b)
-    candidate = theta + phi_t * e / (1.0 + phi_t @ phi_t)  # Eq. (4.1a)
-    norm = jnp.linalg.norm(candidate)
+    return projected_update(theta, phi_t, e, phi_t @ phi_t, rho)
+
+
+def projected_update(
+    theta: Float[Array, " p *batch"],
+    phi: Float[Array, " p *batch"],
+    e: Float[Array, " *batch"],
+    phi_norm2: Float[Array, " *batch"],
+    rho: Float[Array, ""],
+) -> Float[Array, " p *batch"]:
+    r"""(4.1a) from the error $e(t)$ of (4.1b) and $\Phi(t)^T\Phi(t)$: the step
+    $\theta' = \hat\theta + \Phi e / (1 + \Phi^T\Phi)$ projected on the ball of
+    radius $\rho^*$. The parameter axis is the first; a trailing batch axis (the
+    time-major form) is carried along."""
+    candidate = theta + phi * (e / (1.0 + phi_norm2))[None]  # Eq. (4.1a)
+    norm = jnp.sqrt(jnp.sum(candidate * candidate, axis=0))
     # Projection on the ball of radius rho*; inside it the step is unchanged
     # (the where also avoids 0/0 when the candidate is exactly zero).
     scale = jnp.where(norm > rho, rho / jnp.where(norm > 0, norm, 1.0), 1.0)
-    return scale * candidate  # Eq. (4.1a), second line
+    return candidate * scale[None]  # Eq. (4.1a), second line
 
 
 def normalised_gradient_convergence(
@@ -71,10 +86,10 @@ def normalised_gradient_convergence(
     tolerances: Float[Array, " k"],
 ) -> tuple[Float[Array, " p"], Int[Array, " k"]]:
     r"""(4.1a-b) without the history: the last estimate and, for each tolerance,
-    the number of samples after which $\max_k |\hat	heta_k(t) - 	heta^{ref}_k|
+    the number of samples after which $\max_k |\hat\theta_k(t) - \theta^{ref}_k|
     \le$ tol for good (`time` + 1 if still above at the end).
 
-    Memory is $O(p)$ instead of $O(	ext{time} \cdot p)$: for Monte Carlo studies.
+    Memory is $O(p)$ instead of $O(\text{time} \cdot p)$: for Monte Carlo studies.
     """
     rho = jnp.asarray(rho, dtype=phi.dtype)
     n_time = phi.shape[0]
@@ -91,3 +106,50 @@ def normalised_gradient_convergence(
     (theta, last), _ = lax.scan(step, init, (phi, y, jnp.arange(n_time)))
     # `last` = index after the last exceedance; still above at the end -> time + 1.
     return theta, jnp.where(last == n_time, n_time + 1, last)
+
+
+def normalised_gradient_time_major(
+    y: Float[Array, "time batch"],
+    g: Float[Array, "time q"],
+    *,
+    order: int,
+    theta0: Float[Array, " p"],
+    rho: float,
+    unroll: int = 1,
+) -> Float[Array, "batch p"]:
+    r"""Final estimates of seed 001's (4.1a-b) for a batch of outputs, time-major.
+
+    The regressor (3.8b) is $\Phi(t) = [-y(t-1) \dots -y(t-n),\ g(t)]$ where the
+    input part $g(t)$ (the $v(t-i) P_j(v(t-i))$ columns, shape `(time, 4n)`) is the
+    same for every realisation (a fixed excitation), so it is passed once. Equals
+    `normalised_gradient(regressor(v, y_r), y_r, ...)[0]` for each column `y_r`.
+    """
+    if y.ndim != 2 or g.ndim != 2 or g.shape[0] != y.shape[0]:
+        raise ValueError(f"need y (time, batch), g (time, q); got {y.shape}, {g.shape}")
+    check_unroll(unroll)
+    n = int(order)
+    if theta0.shape != (n + g.shape[1],):
+        raise ValueError(
+            f"theta0 must have {n + g.shape[1]} entries; got {theta0.shape}"
+        )
+    batch = y.shape[1]
+    theta = jnp.broadcast_to(theta0[:, None], (theta0.shape[0], batch)).astype(y.dtype)
+    lags = jnp.zeros((n, batch), y.dtype)
+    g_norm2 = jnp.sum(g * g, axis=1)
+
+    def step(carry, row):
+        theta, lags = carry
+        y_t, g_t, gg = row
+        phi_y = -lags  # -y(t-1) .. -y(t-n), Eq. (3.8b)
+        e = y_t - jnp.sum(phi_y * theta[:n], axis=0) - g_t @ theta[n:]  # Eq. (4.1b)
+        phi = jnp.concatenate(
+            [phi_y, jnp.broadcast_to(g_t[:, None], (g_t.shape[0], batch))], axis=0
+        )
+        theta = projected_update(
+            theta, phi, e, jnp.sum(phi_y * phi_y, axis=0) + gg, rho
+        )  # Eq. (4.1a)
+        lags = jnp.concatenate([y_t[None], lags[:-1]], axis=0)
+        return (theta, lags), None
+
+    (theta, _), _ = lax.scan(step, (theta, lags), (y, g, g_norm2), unroll=unroll)
+    return theta.T

@@ -3,10 +3,10 @@
 import jax.numpy as jnp
 import jax.scipy.linalg as jsl
 import numpy as np
-from jaxtyping import Array, ArrayLike, Float
+from jaxtyping import Array, ArrayLike, Bool, Float
 
 from ..._checks import check_finite, concrete
-from ._base import AbstractContinuousLinearBlock
+from ._base import AbstractContinuousLinearBlock, companion_roots
 from .state_space import DiscreteStateSpace
 
 
@@ -57,8 +57,12 @@ class ContinuousTransferFunction(AbstractContinuousLinearBlock):
             raise ValueError("poles need concrete coefficients (not under jit)")
         return np.roots(den)
 
-    def is_stable(self) -> bool:
-        return bool(np.all(self.poles().real < 0.0))
+    def stable(self) -> Bool[Array, ""]:
+        finite = jnp.all(jnp.isfinite(self.den)) & jnp.all(jnp.isfinite(self.num))
+        if self.den.shape[0] == 1:
+            return finite
+        roots = companion_roots(self.den[1:] / self.den[0])
+        return jnp.all(roots.real < 0.0) & finite
 
     def scaled(self, gain) -> "ContinuousTransferFunction":
         return ContinuousTransferFunction(self.num * gain, self.den)

@@ -4,11 +4,11 @@ import equinox as eqx
 import jax.lax as lax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, ArrayLike, Float
+from jaxtyping import Array, ArrayLike, Bool, Float
 
 from ..._checks import check_finite, concrete
 from ..._types import Signal
-from ._base import AbstractDiscreteLinearBlock
+from ._base import AbstractDiscreteLinearBlock, companion_roots
 
 
 class DiscreteTransferFunction(AbstractDiscreteLinearBlock):
@@ -77,8 +77,12 @@ class DiscreteTransferFunction(AbstractDiscreteLinearBlock):
             raise ValueError("poles need concrete coefficients (not under jit)")
         return np.roots(a) if a.shape[0] > 1 else np.zeros(0, complex)
 
-    def is_stable(self) -> bool:
-        return bool(np.all(np.abs(self.poles()) < 1.0))
+    def stable(self) -> Bool[Array, ""]:
+        finite = jnp.all(jnp.isfinite(self.a)) & jnp.all(jnp.isfinite(self.b))
+        if self.a.shape[0] == 1:
+            return finite
+        roots = companion_roots(self.a[1:] / self.a[0])
+        return jnp.all(jnp.abs(roots) < 1.0) & finite
 
     def scaled(self, gain) -> "DiscreteTransferFunction":
         return DiscreteTransferFunction(self.b * gain, self.a, self.dt)

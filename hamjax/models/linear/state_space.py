@@ -4,7 +4,7 @@ import equinox as eqx
 import jax.lax as lax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, ArrayLike, Float
+from jaxtyping import Array, ArrayLike, Bool, Float
 
 from ..._checks import concrete
 from ..._types import Signal
@@ -46,8 +46,11 @@ class DiscreteStateSpace(AbstractDiscreteLinearBlock):
             raise ValueError("poles need concrete matrices (not under jit)")
         return np.linalg.eigvals(A)
 
-    def is_stable(self) -> bool:
-        return bool(np.all(np.abs(self.poles()) < 1.0))
+    def stable(self) -> Bool[Array, ""]:
+        finite = jnp.all(
+            jnp.array([jnp.all(jnp.isfinite(m)) for m in (self.A, self.B, self.C)])
+        )
+        return jnp.all(jnp.abs(jnp.linalg.eigvals(self.A)) < 1.0) & finite
 
     def scaled(self, gain) -> "DiscreteStateSpace":
         return DiscreteStateSpace(self.A, self.B, self.C * gain, self.D * gain, self.dt)

@@ -8,7 +8,10 @@ from .backlash import Backlash as Backlash, BacklashState as BacklashState
 from .dead_zone import DeadZone as DeadZone
 from .identity import Identity as Identity
 from .output_scaled import OutputScaled as OutputScaled
-from .piecewise_linear import PiecewiseLinear as PiecewiseLinear
+from .piecewise_linear import (
+    PiecewiseLinear as PiecewiseLinear,
+    piecewise_linear_map as piecewise_linear_map,
+)
 from .saturation import Saturation as Saturation
 from .scaled import Scaled as Scaled
 from .shifted import Shifted as Shifted

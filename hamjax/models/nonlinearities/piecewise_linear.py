@@ -7,6 +7,18 @@ from ..._checks import concrete
 from ._base import AbstractStaticNonlinearity
 
 
+def piecewise_linear_map(v, k1, k2, d1, d2, l1, l2, *, xp=jnp):
+    """Fig. 2 of seed 001 on `v` from its six numbers (the one implementation:
+    `PiecewiseLinear`, the refinement, the diagnosis and the blind cases call it).
+
+    `xp=numpy` evaluates it on the host with NumPy, elementwise and so bitwise the
+    same as the traced version's operations.
+    """
+    upper = k1 * (v - d1) + l1
+    lower = k2 * (v - d2) + l2
+    return xp.where(v > d1, upper, xp.where(v < d2, lower, 0.0))
+
+
 class PiecewiseLinear(AbstractStaticNonlinearity):
     r"""The seed-001 nonlinearity of Fig. 2, in the signed convention:
 
@@ -56,9 +68,9 @@ class PiecewiseLinear(AbstractStaticNonlinearity):
             )
 
     def __call__(self, v: Float[Array, "*shape"]) -> Float[Array, "*shape"]:
-        upper = self.k1 * (v - self.d1) + self.l1
-        lower = self.k2 * (v - self.d2) + self.l2
-        return jnp.where(v > self.d1, upper, jnp.where(v < self.d2, lower, 0.0))
+        return piecewise_linear_map(
+            v, self.k1, self.k2, self.d1, self.d2, self.l1, self.l2
+        )
 
     @property
     def dead_zone_width(self) -> Float[Array, ""]:

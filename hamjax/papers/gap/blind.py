@@ -37,6 +37,7 @@ from ...models import (
     PiecewiseLinear,
     Tabulated,
 )
+from ...models.nonlinearities.piecewise_linear import piecewise_linear_map
 
 
 # The contract's names, in its order: none, the deterministic effects, the noise ones.
@@ -126,12 +127,8 @@ def _static(nl, v: np.ndarray) -> np.ndarray:
     if isinstance(nl, Identity):
         return v.copy()
     if isinstance(nl, PiecewiseLinear):
-        k1, k2, d1, d2, l1, l2 = (
-            float(getattr(nl, k)) for k in ("k1", "k2", "d1", "d2", "l1", "l2")
-        )
-        return np.where(
-            v > d1, k1 * (v - d1) + l1, np.where(v < d2, k2 * (v - d2) + l2, 0.0)
-        )
+        numbers = (float(getattr(nl, k)) for k in ("k1", "k2", "d1", "d2", "l1", "l2"))
+        return piecewise_linear_map(v, *numbers, xp=np)
     return np.interp(v, np.asarray(nl.v), np.asarray(nl.u))
 
 

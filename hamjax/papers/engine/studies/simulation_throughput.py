@@ -25,7 +25,7 @@ from ....montecarlo.registry import StudyOption, option_values
 from ....montecarlo.runner import run_monte_carlo
 from ....montecarlo.statistics import summarise
 from ....montecarlo.storage import atomic_write_bytes
-from ....montecarlo.time_major import output_summary, output_summary_time_major
+from ....simulation.time_major import output_summary, output_summary_time_major
 
 
 NAME = "simulation-throughput"
@@ -52,7 +52,7 @@ class BacklashPlantTrial(eqx.Module):
         return output_summary(self.plant, self._inputs(key), unroll=self.unroll)
 
     def batched(self, keys: PRNGKeyArray) -> dict[str, Float[Array, " batch"]]:
-        # Same inputs as __call__, scanned time-major (see hamjax.montecarlo.time_major).
+        # Same inputs as __call__, scanned time-major (see hamjax.simulation.time_major).
         v = eqx.filter_vmap(self._inputs)(keys).T
         return output_summary_time_major(self.plant, v, unroll=self.unroll)
 

@@ -6,7 +6,7 @@ from pathlib import Path
 import numpy as np
 
 from .._errors import UserInputError
-from ..io import load_model, read_csv
+from ..io import load_model, read_csv, sampling_period
 from ..models import Hammerstein
 
 
@@ -34,7 +34,7 @@ def _check_record(path: Path, rec: dict) -> float:
         raise UserInputError(f"{path}: input v is constant (nothing to identify)")
     if np.ptp(rec["y"]) == 0:
         raise UserInputError(f"{path}: output y is constant (a dead sensor?)")
-    return float(rec["t"][1] - rec["t"][0])
+    return sampling_period(rec["t"])  # the mean step: float32 timestamps too
 
 
 def read_case(folder: str | Path) -> GapCase:

@@ -48,17 +48,38 @@ def write_json(path: str | os.PathLike, obj: Any) -> None:
     atomic_write_text(path, json.dumps(_to_jsonable(obj), indent=2) + "\n")
 
 
+def read_text(path: Path) -> str:
+    """The text of `path` decoded as UTF-8 (a leading byte-order mark dropped).
+
+    **Raises:** `UserInputError` naming the file if it is missing or not UTF-8.
+    """
+    if not path.is_file():
+        what = "is a folder, not a file" if path.is_dir() else "file not found"
+        raise UserInputError(f"{path}: {what}")
+    try:
+        raw = path.read_bytes()
+    except OSError as err:
+        raise UserInputError(f"{path}: cannot be read ({err.strerror})") from None
+    try:
+        return raw.decode("utf-8-sig")
+    except UnicodeDecodeError as err:
+        raise UserInputError(
+            f"{path}: not UTF-8 text (byte 0x{raw[err.start]:02x} at offset {err.start})"
+        ) from None
+
+
 def read_json(path: str | os.PathLike) -> dict:
     """Read a JSON object; `UserInputError` naming the file if missing or malformed."""
     path = Path(path)
-    if not path.is_file():
-        raise UserInputError(f"{path}: file not found")
+    text = read_text(path)
     try:
-        obj = json.loads(path.read_text())
+        obj = json.loads(text)
     except json.JSONDecodeError as err:
         raise UserInputError(
             f"{path}: not valid JSON ({err.msg}, line {err.lineno})"
         ) from None
+    except RecursionError:
+        raise UserInputError(f"{path}: JSON nested too deeply") from None
     if not isinstance(obj, dict):
         raise UserInputError(f"{path}: expected a JSON object at the top level")
     return obj

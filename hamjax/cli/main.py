@@ -37,6 +37,9 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
         description="Identify Hammerstein systems with hard input nonlinearities "
         "and diagnose sim-to-real gaps.",
     )
+    from .. import __version__
+
+    parser.add_argument("--version", action="version", version=f"hamjax {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     sub.required = True
     for name, module in _COMMANDS.items():

@@ -150,6 +150,18 @@ def load_model(source: str | os.PathLike | dict) -> tuple[Hammerstein, float | N
     return Hammerstein(nl, lin), dt
 
 
+def require_stable(plant: Hammerstein, name: str | os.PathLike) -> None:
+    """Refuse a plant whose linear block is unstable, before anything simulates it:
+    the check `hamjax.simulation.simulate` makes (`simulation.check_stable`), as a
+    `UserInputError` naming the file `name`."""
+    from ..simulation import check_stable
+
+    try:
+        check_stable(plant.linear, "the plant's linear block")
+    except ValueError as err:
+        raise UserInputError(f"{name}: {err}") from None
+
+
 def _static_to_dict(nl) -> dict:
     if isinstance(nl, Identity):
         return {"kind": "identity"}

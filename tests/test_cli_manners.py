@@ -311,6 +311,7 @@ def test_non_finite_numbers_are_never_a_diagnosis():
 
 
 @pytest.mark.slow
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")  # NumPy overflows on the way
 def test_diagnosis_of_an_overflowing_plant_raises(tmp_path):
     from hamjax.diagnosis.case import read_case
     from hamjax.diagnosis.diagnose import DiagnosisNotFinite, diagnose_gap

@@ -54,3 +54,25 @@ from .simulation import (
     simulate as simulate,
     simulate_diffrax as simulate_diffrax,
 )
+
+
+def _version() -> str:
+    """The installed distribution's version; from a source tree that is not
+    installed, the version in `pyproject.toml` beside the package."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("hamjax")
+    except PackageNotFoundError:
+        pass
+    import tomllib
+    from pathlib import Path
+
+    try:
+        with open(Path(__file__).resolve().parents[1] / "pyproject.toml", "rb") as f:
+            return str(tomllib.load(f)["project"]["version"])
+    except (OSError, KeyError, tomllib.TOMLDecodeError):
+        return "0+unknown"
+
+
+__version__ = _version()

@@ -50,7 +50,7 @@ def test_csv_extra_columns_are_kept_and_ignored(tmp_path):
         ("t,v,y\n0,1,inf\n1,2,3\n", "column y has inf"),
         ("t,v,y\n0,1,2\n1,2,3\n3,1,1\n", "not uniformly sampled"),
         ("t,v,y\n0,1,2\n0,2,3\n", "strictly increasing"),
-        ("t,v,y\n0,1,x\n1,2,3\n", "malformed numbers"),
+        ("t,v,y\n0,1,x\n1,2,3\n", "line 2: malformed number .x."),
         ("t,v,y\n0,1,2\n", "at least 2 rows"),
         ("", "empty file"),
     ],

@@ -1,23 +1,36 @@
 """`hamjax blind make|score`: the public withheld-effect benchmark."""
 
 import argparse
+import sys
 from pathlib import Path
 
+from .._errors import UserInputError
 from ._common import positive_int
 
 
 def register(sub) -> None:
-    p = sub.add_parser("blind", help="make or score a blind withheld-effect benchmark")
+    p = sub.add_parser(
+        "blind",
+        help="make or score a blind withheld-effect benchmark",
+    )
     verbs = p.add_subparsers(dest="verb", metavar="VERB")
     verbs.required = True
     m = verbs.add_parser(
         "make",
         help="draw K cases into DIR/cases/<name>/ (truth in DIR/truth.json only)",
+        description="Draw K gap cases into DIR/cases/<name>/ (docs/gap-case-folder.md) "
+        "and their truth into DIR/truth.json. A non-empty DIR is refused unless "
+        "--force, which first removes an earlier benchmark's files.",
     )
     m.add_argument("--cases", type=positive_int, required=True, metavar="K")
     m.add_argument("--seed", type=int, default=0)
     m.add_argument("--realism", choices=("exact", "realistic"), default="exact")
     m.add_argument("--out", type=Path, required=True)
+    m.add_argument(
+        "--force",
+        action="store_true",
+        help="write into a non-empty DIR (an earlier benchmark there is removed)",
+    )
     m.set_defaults(func=run_make)
     s = verbs.add_parser(
         "score",
@@ -29,22 +42,113 @@ def register(sub) -> None:
     s.set_defaults(func=run_score)
 
 
+def _check_make_out(out: Path, force: bool) -> list[Path]:
+    """The earlier benchmark files to remove; refuses a non-empty DIR without --force."""
+    from ._outputs import check_output_folder, earlier_blind, is_nonempty_folder
+
+    check_output_folder(out)
+    if is_nonempty_folder(out) and not force:
+        raise UserInputError(
+            f"{out}: --out is not empty; add --force to write the benchmark there "
+            "(an earlier benchmark's files are removed), or choose another --out"
+        )
+    return earlier_blind(out)
+
+
 def run_make(args: argparse.Namespace) -> int:
     import jax.random as jr
 
     from ..papers.gap.blind import make_cases
+    from ._outputs import remove_files
 
+    earlier = _check_make_out(args.out, args.force)
+    remove_files(earlier, args.out)
     truth = make_cases(jr.key(args.seed), args.cases, args.out, realism=args.realism)
     print(f"wrote {len(truth['cases'])} {args.realism} cases to {args.out / 'cases'}")
     print(f"diagnose them with: hamjax diagnose {args.out / 'cases'}/* --out RESULTS")
     return 0
 
 
+def _read_truth(folder: Path) -> dict:
+    """DIR/truth.json, checked to list cases with their effect and noise std."""
+    from ..io import read_json
+
+    path = Path(folder) / "truth.json"
+    if not path.is_file():
+        raise UserInputError(
+            f"{path}: not found (is {folder} a blind-benchmark folder?)"
+        )
+    truth = read_json(path)
+    cases = truth.get("cases")
+    if not isinstance(cases, dict) or not cases:
+        raise UserInputError(f"{path}: no cases listed (key 'cases')")
+    for name, tr in cases.items():
+        if not (isinstance(tr, dict) and {"effect", "noise_std"} <= set(tr)):
+            raise UserInputError(f"{path}: case {name} lacks 'effect' or 'noise_std'")
+    return truth
+
+
+def _result_path(results: Path, name: str, n_cases: int) -> Path:
+    """Where `hamjax diagnose` put case `name`: RESULTS/<name>/diagnosis.json, or
+    RESULTS/diagnosis.json when the benchmark has a single case."""
+    per_case = results / name / "diagnosis.json"
+    if n_cases == 1 and not per_case.is_file():
+        return results / "diagnosis.json"
+    return per_case
+
+
+def _read_result(path: Path) -> tuple[str, tuple[float, float]]:
+    """The effect named in a diagnosis.json and its gaps before and after."""
+    from ..io import read_json
+
+    r = read_json(path)
+    gaps = (r.get("gap_before"), r.get("gap_after"))
+    if not isinstance(r.get("effect"), str) or not all(
+        isinstance(g, int | float) and not isinstance(g, bool) for g in gaps
+    ):
+        raise UserInputError(
+            f"{path}: not a diagnosis (needs 'effect', 'gap_before', 'gap_after')"
+        )
+    return r["effect"], (float(gaps[0]), float(gaps[1]))
+
+
+def read_results(folder: Path, results: Path) -> tuple[dict, dict, dict]:
+    """`(truth, named, shrinks)` for `diagnosis.blind.score`; refuses RESULTS
+    without any result, and warns on stderr how many cases have none."""
+    truth = _read_truth(folder)
+    if not Path(results).is_dir():
+        raise UserInputError(f"{results}: results folder not found")
+    names = list(truth["cases"])
+    named, shrinks = {}, {}
+    for name in names:
+        path = _result_path(Path(results), name, len(names))
+        if path.is_file():
+            named[name], shrinks[name] = _read_result(path)
+    missing = [n for n in names if n not in named]
+    if not named:
+        raise UserInputError(
+            f"{results}: no diagnosis.json for any of the {len(names)} cases of "
+            f"{Path(folder) / 'truth.json'} (run `hamjax diagnose "
+            f"{Path(folder) / 'cases'}/* --out {results}` first)"
+        )
+    if missing:
+        shown = ", ".join(missing[:5]) + (", ..." if len(missing) > 5 else "")
+        print(
+            f"hamjax: warning: {results}: {len(missing)} of {len(names)} cases have "
+            f"no diagnosis.json ({shown}); scoring the other {len(named)}",
+            file=sys.stderr,
+        )
+    return truth, named, shrinks
+
+
 def run_score(args: argparse.Namespace) -> int:
     from ..io import write_json
-    from ..papers.gap.blind import format_score, score_folder
+    from ..papers.gap.blind import format_score, score
+    from ._outputs import check_output_file
 
-    s = score_folder(args.dir, args.results)
+    check_output_file(args.results / "score.json", "RESULTS/score.json")
+    truth, named, shrinks = read_results(args.dir, args.results)
+    s = score(truth, named, shrinks)
     print(format_score(s))
     write_json(args.results / "score.json", s)
     return 0

@@ -3,6 +3,7 @@
 import argparse
 import importlib
 import sys
+import time
 import traceback
 
 
@@ -37,6 +38,9 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
         description="Identify Hammerstein systems with hard input nonlinearities "
         "and diagnose sim-to-real gaps.",
     )
+    from .. import __version__
+
+    parser.add_argument("--version", action="version", version=f"hamjax {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     sub.required = True
     for name, module in _COMMANDS.items():
@@ -48,6 +52,9 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
             raise
         brief = chosen not in (None, name) and hasattr(mod, "register_brief")
         (mod.register_brief if brief else mod.register)(sub)
+    from ._help import apply_conventions
+
+    apply_conventions(parser)
     return parser
 
 
@@ -63,20 +70,43 @@ def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     parser = build_parser(argv)
     args = parser.parse_args(argv)
+    verbose = bool(getattr(args, "verbose", False))
+    start = time.perf_counter()
     try:
-        result = args.func(args)
-    except (UserInputError, ValueError, FileNotFoundError, NotADirectoryError) as err:
-        if isinstance(err, ValueError) and not isinstance(err, UserInputError):
-            # A ValueError raised by our validation names the problem; a debug
-            # environment variable shows the traceback for bug reports.
-            if _debug():
-                traceback.print_exc()
-        print(f"hamjax: error: {err}", file=sys.stderr)
+        with _quiet_stdout(bool(getattr(args, "quiet", False))):
+            result = args.func(args)
+    except (UserInputError, ValueError, OSError) as err:
+        if not isinstance(err, UserInputError) and (verbose or _debug()):
+            # A ValueError raised by our validation names the problem; --verbose
+            # (or a debug environment variable) shows the traceback for bug reports.
+            traceback.print_exc()
+        print(f"hamjax: error: {_one_line(err)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("hamjax: interrupted; results already written are kept", file=sys.stderr)
         return 130
+    if verbose:
+        took = time.perf_counter() - start
+        print(f"hamjax: {args.command} took {took:.1f} s", file=sys.stderr)
     return int(result or 0)
+
+
+def _one_line(err: BaseException) -> str:
+    """The message of `err` on one line; an OSError as `file: reason`."""
+    if isinstance(err, OSError) and err.strerror:
+        where = f"{err.filename}: " if err.filename else ""
+        return f"{where}{err.strerror}"
+    return " ".join(str(err).split("\n"))
+
+
+def _quiet_stdout(quiet: bool):
+    """Inside: stdout discarded when `quiet` (errors and warnings go to stderr)."""
+    import contextlib
+    import io
+
+    return (
+        contextlib.redirect_stdout(io.StringIO()) if quiet else contextlib.nullcontext()
+    )
 
 
 def _debug() -> bool:

@@ -6,7 +6,7 @@ from pathlib import Path
 import numpy as np
 
 from .._errors import UserInputError
-from ..io import load_model, read_csv
+from ..io import load_model, read_csv, require_stable, sampling_period
 from ..models import Hammerstein
 
 
@@ -34,7 +34,7 @@ def _check_record(path: Path, rec: dict) -> float:
         raise UserInputError(f"{path}: input v is constant (nothing to identify)")
     if np.ptp(rec["y"]) == 0:
         raise UserInputError(f"{path}: output y is constant (a dead sensor?)")
-    return float(rec["t"][1] - rec["t"][0])
+    return sampling_period(rec["t"])  # the mean step: float32 timestamps too
 
 
 def read_case(folder: str | Path) -> GapCase:
@@ -42,7 +42,8 @@ def read_case(folder: str | Path) -> GapCase:
 
     **Raises:** `UserInputError` naming the file and the problem (missing or
     malformed CSV, NaN/inf, non-uniform `t`, different `dt` in the two records,
-    constant input or output, unknown model kind, a model `dt` that differs from the data).
+    constant input or output, unknown model kind, an unstable model, a model `dt` that
+    differs from the data).
     """
     folder = Path(folder)
     if not folder.is_dir():
@@ -60,6 +61,7 @@ def read_case(folder: str | Path) -> GapCase:
     model_path = folder / "model.json"
     if model_path.exists():
         model, model_dt = load_model(model_path)
+        require_stable(model, model_path)
         if model_dt is not None and not np.isclose(model_dt, dt_e, rtol=1e-6):
             raise UserInputError(
                 f"{model_path}: discrete model dt {model_dt:.6g} s differs from the data's "

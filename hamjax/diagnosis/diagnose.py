@@ -38,6 +38,29 @@ class GapDiagnosis(eqx.Module):
     residual_after: np.ndarray
 
 
+class DiagnosisNotFinite(ValueError):
+    """Case `index` came out NaN or inf (an overflow): an error, never a diagnosis."""
+
+    def __init__(self, index: int, what: str):
+        super().__init__(
+            f"the diagnosis is not finite ({what}): is the nominal model stable and "
+            "are the records on a sensible scale?"
+        )
+        self.index = index
+
+
+def _not_finite(d: GapDiagnosis) -> str | None:
+    """The first non-finite number of `d` that a diagnosis stands on, or None."""
+    for name in ("gap_before", "gap_after", "noise_floor"):
+        x = getattr(d, name)
+        if not np.isfinite(x):
+            return f"{name} = {x}"
+    for name in ("y_nominal", "y_augmented", "residual_before", "residual_after"):
+        if not np.all(np.isfinite(getattr(d, name))):
+            return f"{name} has NaN or inf"
+    return None
+
+
 ONE_GROUP = 8192  # records up to this length share one padded length per call
 
 
@@ -118,6 +141,9 @@ def diagnose_many(
     split over the devices. `on_result(i, diagnosis)` is
     called as soon as case `i` is done, so a caller can write each result while the
     others are still being fitted.
+
+    **Raises:** `DiagnosisNotFinite` (its `index` the case) if a case's gaps, noise
+    floor or simulated outputs are NaN or inf.
     """
     if not jax.config.jax_enable_x64:
         # float32 fits stop early and at other minima: different, worse diagnoses
@@ -145,6 +171,9 @@ def diagnose_many(
         def finished(j: int, fit: dict, preps=preps, members=members) -> None:
             i = members[j]
             out[i] = _result(preps[j], attribute(preps[j], fit), items[i][3])
+            bad = _not_finite(out[i])
+            if bad is not None:
+                raise DiagnosisNotFinite(i, bad)
             if on_result is not None:
                 on_result(i, out[i])
 

@@ -14,4 +14,5 @@ from .model_json import (
     load_model as load_model,
     model_to_dict as model_to_dict,
     nonlinearity_from_dict as nonlinearity_from_dict,
+    require_stable as require_stable,
 )

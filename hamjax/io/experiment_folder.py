@@ -1,4 +1,4 @@
-"""Experiment folders (`contracts/experiments.md`): the design and the measured data."""
+"""Experiment folders (`docs/experiment-folder.md`): the design and the measured data."""
 
 from collections.abc import Sequence
 from pathlib import Path
@@ -25,7 +25,23 @@ def read_design(folder: Path, method: str, required: Sequence[str] = ()) -> dict
     for key in required:
         if key not in design:
             raise UserInputError(f"{path}: missing key {key!r}")
+    if "dt" in design:
+        _positive_number(path, "dt", design["dt"])
     return design
+
+
+def _positive_number(path: Path, key: str, x) -> float:
+    """`x` as a positive finite float, or a `UserInputError` naming `path` and `key`."""
+    ok = isinstance(x, int | float) and not isinstance(x, bool)
+    try:
+        f = float(x) if ok else float("nan")
+    except OverflowError:
+        f = float("inf")
+    if not (np.isfinite(f) and f > 0):
+        raise UserInputError(
+            f"{path}: {key!r} must be a positive number; got {x!r:.60}"
+        )
+    return f
 
 
 def read_data(folder: Path, design: dict, v_designed: np.ndarray) -> np.ndarray:
@@ -34,7 +50,8 @@ def read_data(folder: Path, design: dict, v_designed: np.ndarray) -> np.ndarray:
     blindly)."""
     path = Path(folder) / "data.csv"
     data = read_csv(path, required=("t", "v", "y"))
-    n, dt = v_designed.shape[0], float(design["dt"])
+    n = v_designed.shape[0]
+    dt = _positive_number(Path(folder) / "experiment.json", "dt", design.get("dt"))
     t, v = data["t"], data["v"]
     if t.shape[0] != n:
         raise UserInputError(

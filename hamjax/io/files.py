@@ -2,7 +2,7 @@
 
 import json
 import os
-import tempfile
+import secrets
 from pathlib import Path
 from typing import Any
 
@@ -11,13 +11,26 @@ import numpy as np
 from .._errors import UserInputError
 
 
+def _temporary_beside(path: Path) -> tuple[int, Path]:
+    """Create a new empty file beside `path` for writing; mode 0o666 less the
+    umask, as `open()` makes it (`tempfile.mkstemp` would make it 0o600)."""
+    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0)
+    while True:
+        tmp = path.parent / f".{path.name}.{secrets.token_hex(4)}.tmp"
+        try:
+            return os.open(tmp, flags, 0o666), tmp
+        except FileExistsError:
+            continue
+
+
 def atomic_write_text(path: str | os.PathLike, text: str) -> None:
-    """Write `text` to `path` through a temporary file and a rename."""
+    """Write `text` to `path` through a temporary file and a rename; the file gets
+    the permissions the user's umask gives a new file."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    fd, tmp = _temporary_beside(path)
     try:
-        with os.fdopen(fd, "w") as f:
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
             f.write(text)
         os.replace(tmp, path)
     except BaseException:
@@ -48,17 +61,38 @@ def write_json(path: str | os.PathLike, obj: Any) -> None:
     atomic_write_text(path, json.dumps(_to_jsonable(obj), indent=2) + "\n")
 
 
+def read_text(path: Path) -> str:
+    """The text of `path` decoded as UTF-8 (a leading byte-order mark dropped).
+
+    **Raises:** `UserInputError` naming the file if it is missing or not UTF-8.
+    """
+    if not path.is_file():
+        what = "is a folder, not a file" if path.is_dir() else "file not found"
+        raise UserInputError(f"{path}: {what}")
+    try:
+        raw = path.read_bytes()
+    except OSError as err:
+        raise UserInputError(f"{path}: cannot be read ({err.strerror})") from None
+    try:
+        return raw.decode("utf-8-sig")
+    except UnicodeDecodeError as err:
+        raise UserInputError(
+            f"{path}: not UTF-8 text (byte 0x{raw[err.start]:02x} at offset {err.start})"
+        ) from None
+
+
 def read_json(path: str | os.PathLike) -> dict:
     """Read a JSON object; `UserInputError` naming the file if missing or malformed."""
     path = Path(path)
-    if not path.is_file():
-        raise UserInputError(f"{path}: file not found")
+    text = read_text(path)
     try:
-        obj = json.loads(path.read_text())
+        obj = json.loads(text)
     except json.JSONDecodeError as err:
         raise UserInputError(
             f"{path}: not valid JSON ({err.msg}, line {err.lineno})"
         ) from None
+    except RecursionError:
+        raise UserInputError(f"{path}: JSON nested too deeply") from None
     if not isinstance(obj, dict):
         raise UserInputError(f"{path}: expected a JSON object at the top level")
     return obj

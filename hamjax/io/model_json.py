@@ -1,4 +1,4 @@
-"""The `model.json` schema of `contracts/gap-case.md`: load into Modules and back."""
+"""The `model.json` schema (`docs/model-json.md`): load into Modules and back."""
 
 import os
 from pathlib import Path
@@ -25,15 +25,33 @@ _NL_KINDS = ("identity", "piecewise_linear", "tabulated", "backlash")
 _LIN_KINDS = ("discrete_tf", "continuous_tf")
 
 
+def _as_float(x: Any) -> float | None:
+    """`x` as a finite float, or None if it is not a finite JSON number (a bool, a
+    string, NaN/inf, an integer beyond the float range)."""
+    if isinstance(x, bool) or not isinstance(x, int | float):
+        return None
+    try:
+        f = float(x)
+    except OverflowError:
+        return None
+    return f if np.isfinite(f) else None
+
+
 def _number(where: str, obj: dict, key: str) -> float:
     if key not in obj:
         raise UserInputError(f"{where}: missing field {key!r}")
-    x = obj[key]
-    if isinstance(x, bool) or not isinstance(x, int | float) or not np.isfinite(x):
+    f = _as_float(obj[key])
+    if f is None:
         raise UserInputError(
-            f"{where}: field {key!r} must be a finite number; got {x!r}"
+            f"{where}: field {key!r} must be a finite number; got {_short(obj[key])}"
         )
-    return float(x)
+    return f
+
+
+def _short(x: Any, limit: int = 60) -> str:
+    """`repr(x)` cut to `limit` characters (a message stays one readable line)."""
+    text = repr(x) if not isinstance(x, int) or abs(x) < 10**50 else "a huge integer"
+    return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 def _numbers(where: str, obj: dict, key: str, *, min_len: int = 1) -> np.ndarray:
@@ -44,13 +62,14 @@ def _numbers(where: str, obj: dict, key: str, *, min_len: int = 1) -> np.ndarray
         isinstance(e, int | float) and not isinstance(e, bool) for e in x
     ):
         raise UserInputError(
-            f"{where}: field {key!r} must be a list of numbers; got {x!r}"
+            f"{where}: field {key!r} must be a list of numbers; got {_short(x)}"
         )
-    arr = np.asarray(x, dtype=float)
+    values = [_as_float(e) for e in x]
+    if any(f is None for f in values):
+        raise UserInputError(f"{where}: field {key!r} has non-finite numbers")
+    arr = np.asarray(values, dtype=float)
     if arr.shape[0] < min_len:
         raise UserInputError(f"{where}: field {key!r} needs at least {min_len} numbers")
-    if not np.all(np.isfinite(arr)):
-        raise UserInputError(f"{where}: field {key!r} has non-finite numbers")
     return arr
 
 
@@ -60,7 +79,7 @@ def _kind(where: str, obj: Any, allowed: tuple[str, ...]) -> str:
     kind = obj.get("kind")
     if kind not in allowed:
         raise UserInputError(
-            f"{where}: unknown kind {kind!r} (expected one of {', '.join(allowed)})"
+            f"{where}: unknown kind {_short(kind)} (expected one of {', '.join(allowed)})"
         )
     return kind
 
@@ -129,6 +148,18 @@ def load_model(source: str | os.PathLike | dict) -> tuple[Hammerstein, float | N
     nl = nonlinearity_from_dict(obj["nonlinearity"], f"{name}: nonlinearity")
     lin, dt = linear_from_dict(obj["linear"], f"{name}: linear")
     return Hammerstein(nl, lin), dt
+
+
+def require_stable(plant: Hammerstein, name: str | os.PathLike) -> None:
+    """Refuse a plant whose linear block is unstable, before anything simulates it:
+    the check `hamjax.simulation.simulate` makes (`simulation.check_stable`), as a
+    `UserInputError` naming the file `name`."""
+    from ..simulation import check_stable
+
+    try:
+        check_stable(plant.linear, "the plant's linear block")
+    except ValueError as err:
+        raise UserInputError(f"{name}: {err}") from None
 
 
 def _static_to_dict(nl) -> dict:

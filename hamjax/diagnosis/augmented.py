@@ -26,58 +26,48 @@ import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
 from ..models.nonlinearities.piecewise_linear import piecewise_linear_map
-from .effects.backlash import play_step
-from .effects.dead_zone import dead_zone
-from .effects.output_nonlinearity import output_map
-from .effects.preload import add_preload
-from .effects.rate_limit import rate_limit_step
-from .effects.saturation import saturate
+from .effects._base import UNIT_MAX, StartContext, unit_raw
+from .effects.backlash import BacklashEffect, play_step
+from .effects.dead_zone import DeadZoneEffect, dead_zone
+from .effects.extra_pole import ExtraPoleEffect
+from .effects.output_nonlinearity import OutputNonlinearityEffect, output_map
+from .effects.preload import PreloadEffect, add_preload
+from .effects.rate_limit import RateLimitEffect, rate_limit_step
+from .effects.saturation import SaturationEffect, saturate
 from .effects.time_delay import delay
 
 
 NOMINAL_SLOTS = ("k1", "k2", "d1", "d2", "l1", "l2", "in_scale", "out_scale", "gain")
-EFFECT_SLOTS = (
-    "rate",
-    "backlash",
-    "dz_lo",
-    "dz_hi",
-    "preload",
-    "sat_lo",
-    "sat_hi",
-    "pole",
-    "out_q2",
-    "out_q3",
-    "out_lo",
-    "out_hi",
-    "out_db",
+# The deterministic effects in the order of the signal chain above; each owns its
+# slots (neutral value, transform, scale) in its own file under `effects/`.
+CHAIN = (
+    RateLimitEffect(),
+    BacklashEffect(),
+    DeadZoneEffect(),
+    PreloadEffect(),
+    SaturationEffect(),
+    ExtraPoleEffect(),
+    OutputNonlinearityEffect(),
 )
-# Slots whose physical value is |raw| (widths and rates are non-negative).
-_ABS_SLOTS = ("rate", "backlash", "dz_lo", "dz_hi", "out_db")
+EFFECT_SLOTS = tuple(slot for effect in CHAIN for slot in effect.slots)
 EFFECT_NEUTRAL = {
-    "rate": np.inf,
-    "backlash": 0.0,
-    "dz_lo": 0.0,
-    "dz_hi": 0.0,
-    "preload": 0.0,
-    "sat_lo": -np.inf,
-    "sat_hi": np.inf,
-    "pole": 0.0,
-    "out_q2": 0.0,
-    "out_q3": 0.0,
-    "out_lo": -np.inf,
-    "out_hi": np.inf,
-    "out_db": 0.0,
+    slot: effect.neutral[slot] for effect in CHAIN for slot in effect.slots
 }
-POLE_MAX = 0.995  # the extra pole is 0.995 * sigmoid(raw): inside [0, 1), smooth
+# Slots whose physical value is |raw| (widths and rates are non-negative), and those
+# mapped smoothly into [0, 1) (the extra pole).
+_ABS_SLOTS = tuple(slot for effect in CHAIN for slot in effect.positive)
+_UNIT_SLOTS = tuple(slot for effect in CHAIN for slot in effect.unit_interval)
 NL_IDENTITY, NL_PIECEWISE, NL_TABULATED = 0, 1, 2
 
 
 def raw_from_physical(name: str, value: float) -> float:
     """Inverse of the slot transform (used to place starting values)."""
-    if name == "pole":
-        x = min(max(value / POLE_MAX, 1e-6), 1 - 1e-6)
-        return float(np.log(x / (1 - x)))
-    return float(value)
+    return unit_raw(value) if name in _UNIT_SLOTS else float(value)
+
+
+def effect_scales(ctx: StartContext) -> dict[str, float]:
+    """The scale of every effect slot, from the effects that own them."""
+    return {k: v for effect in CHAIN for k, v in effect.scales(ctx).items()}
 
 
 def slot_names(n_max: int) -> tuple[str, ...]:
@@ -133,9 +123,9 @@ def full_parameters(
     raw = case.anchor + case.scale * moved
     n_max = n_slots - len(NOMINAL_SLOTS) - len(EFFECT_SLOTS)
     is_abs = np.isin(np.array(slot_names(n_max)), _ABS_SLOTS)
-    is_pole = np.array(slot_names(n_max)) == "pole"
+    is_unit = np.isin(np.array(slot_names(n_max)), _UNIT_SLOTS)
     phys = jnp.where(is_abs, jnp.abs(raw), raw)
-    phys = jnp.where(is_pole, POLE_MAX * jax.nn.sigmoid(raw), phys)
+    phys = jnp.where(is_unit, UNIT_MAX * jax.nn.sigmoid(raw), phys)
     # `where`, not arithmetic, so the infinite neutral values never meet a tangent.
     return jnp.where(row.free, phys, case.neutral)
 

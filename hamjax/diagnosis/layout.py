@@ -24,6 +24,7 @@ from .augmented import (
     NOMINAL_SLOTS,
     CaseArrays,
     Row,
+    effect_scales,
     raw_from_physical,
     slot_names,
 )
@@ -39,6 +40,7 @@ from .effects import (
     StartContext,
     TimeDelayEffect,
 )
+from .effects._base import output_half_range, scale_span
 from .effects.time_delay import MAX_DELAY
 
 
@@ -224,7 +226,7 @@ def prepare(
         zip(("k1", "k2", "d1", "d2", "l1", "l2"), nom.pl, strict=False)
     )
     nominal_values.update(in_scale=1.0, out_scale=1.0, gain=1.0)
-    span = max(ctx.v_max - ctx.v_min, 1e-12)
+    span = scale_span(ctx)
     for i, name in enumerate(NOMINAL_SLOTS):
         val_ = nominal_values[name]
         anchor[i] = neutral[i] = val_
@@ -239,23 +241,9 @@ def prepare(
         i = len(NOMINAL_SLOTS) + len(EFFECT_SLOTS) + j
         anchor[i] = neutral[i] = den_slots[j]
         scale[i] = max(0.1 * abs(den_slots[j]), 0.1 * den_scale)
-    w_half = max(abs(ctx.w_quantiles[0.98]), abs(ctx.w_quantiles[0.02]), 1e-12)
+    w_half = output_half_range(ctx)
     w_centre = 0.0  # bend about w = 0 (a sensor's zero): a pure quadratic stays exact
-    effect_scale = {
-        "rate": 0.1 * ctx.max_step / dt,
-        "backlash": 0.05 * span,
-        "dz_lo": 0.05 * ctx.v_absmax,
-        "dz_hi": 0.05 * ctx.v_absmax,
-        "preload": 0.1 * ctx.u_std,
-        "sat_lo": 0.2 * ctx.u_std,
-        "sat_hi": 0.2 * ctx.u_std,
-        "pole": 1.0,
-        "out_q2": 0.05,
-        "out_q3": 0.05,
-        "out_lo": 0.2 * w_half,
-        "out_hi": 0.2 * w_half,
-        "out_db": 0.05 * w_half,
-    }
+    effect_scale = effect_scales(ctx)
     for name in EFFECT_SLOTS:
         i = names.index(name)
         neutral[i] = EFFECT_NEUTRAL[name]

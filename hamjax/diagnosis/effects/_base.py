@@ -20,20 +20,42 @@ class StartContext(eqx.Module):
 
 
 class AbstractEffect(eqx.Module):
-    """A candidate effect: a parametrised augmentation of the nominal model.
+    r"""A candidate effect: a parametrised augmentation of the nominal model.
 
-    Deterministic effects free some `slots` of the universal augmented model
-    (`hamjax.diagnosis.augmented`); at their `neutral` values the augmented model
-    is the nominal model exactly. `starts(ctx)` gives starting values (multi-start
-    under `vmap`), each a `{slot: value}` dict in physical units.
+    A deterministic effect owns some `slots` of the universal augmented model
+    (`hamjax.diagnosis.augmented`), and everything about them:
+
+    - `neutral[slot]`: the physical value at which the effect vanishes (the
+      augmented model is then the nominal model exactly);
+    - `positive`: slots whose physical value is $|raw|$ (widths, rates);
+    - `unit_interval`: slots whose physical value is $0.995\,\sigma(raw)$, in
+      $[0, 1)$ (a pole), see `to_unit_interval`;
+    - `scales(ctx)`: the step of one unit of the fitted parameter, per slot;
+    - `starts(ctx)`: starting values (multi-start under `vmap`), each a
+      `{slot: value}` dict in physical units.
     """
 
     name: ClassVar[str]
     slots: ClassVar[tuple[str, ...]] = ()
+    neutral: ClassVar[dict[str, float]] = {}
+    positive: ClassVar[tuple[str, ...]] = ()
+    unit_interval: ClassVar[tuple[str, ...]] = ()
     deterministic: ClassVar[bool] = True
+
+    def scales(self, ctx: StartContext) -> dict[str, float]:
+        return {}
 
     def starts(self, ctx: StartContext) -> list[dict[str, float]]:
         return [{}]
+
+
+UNIT_MAX = 0.995  # a unit-interval slot is 0.995 * sigmoid(raw): inside [0, 1), smooth
+
+
+def unit_raw(value: float) -> float:
+    """The raw value of a unit-interval slot at physical `value` (inverse sigmoid)."""
+    x = min(max(value / UNIT_MAX, 1e-6), 1 - 1e-6)
+    return float(np.log(x / (1 - x)))
 
 
 def quantile_pair(ctx: StartContext, lo: float, hi: float) -> tuple[float, float]:
@@ -44,3 +66,16 @@ def quantile_pair(ctx: StartContext, lo: float, hi: float) -> tuple[float, float
 def span(ctx: StartContext) -> float:
     """Peak-to-peak input range (never 0)."""
     return max(ctx.v_max - ctx.v_min, np.finfo(float).tiny)
+
+
+def scale_span(ctx: StartContext) -> float:
+    """Peak-to-peak input range floored at 1e-12: the unit of the input slots'
+    scales (and of the nominal map's offsets)."""
+    return max(ctx.v_max - ctx.v_min, 1e-12)
+
+
+def output_half_range(ctx: StartContext) -> float:
+    r"""Half the range of the nominal output, $\max(|w_{0.98}|, |w_{0.02}|)$ (never
+    0): the unit of the output-map slots."""
+    wq = ctx.w_quantiles
+    return max(abs(wq[0.98]), abs(wq[0.02]), 1e-12)

@@ -3,7 +3,7 @@
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from ._base import AbstractEffect, StartContext, span
+from ._base import AbstractEffect, StartContext, scale_span, span
 
 
 def play_step(
@@ -22,6 +22,11 @@ class BacklashEffect(AbstractEffect):
 
     name = "backlash"
     slots = ("backlash",)
+    neutral = {"backlash": 0.0}
+    positive = ("backlash",)
+
+    def scales(self, ctx: StartContext) -> dict[str, float]:
+        return {"backlash": 0.05 * scale_span(ctx)}
 
     def starts(self, ctx: StartContext) -> list[dict[str, float]]:
         return [{"backlash": 0.04 * span(ctx)}, {"backlash": 0.2 * span(ctx)}]

@@ -25,6 +25,11 @@ class DeadZoneEffect(AbstractEffect):
 
     name = "dead_zone"
     slots = ("dz_lo", "dz_hi")
+    neutral = {"dz_lo": 0.0, "dz_hi": 0.0}
+    positive = ("dz_lo", "dz_hi")
+
+    def scales(self, ctx: StartContext) -> dict[str, float]:
+        return {"dz_lo": 0.05 * ctx.v_absmax, "dz_hi": 0.05 * ctx.v_absmax}
 
     def starts(self, ctx: StartContext) -> list[dict[str, float]]:
         a = ctx.v_absmax

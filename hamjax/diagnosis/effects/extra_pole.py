@@ -8,6 +8,11 @@ class ExtraPoleEffect(AbstractEffect):
 
     name = "extra_pole"
     slots = ("pole",)
+    neutral = {"pole": 0.0}
+    unit_interval = ("pole",)
+
+    def scales(self, ctx: StartContext) -> dict[str, float]:
+        return {"pole": 1.0}
 
     def starts(self, ctx: StartContext) -> list[dict[str, float]]:
         return [{"pole": 0.3}, {"pole": 0.85}]

@@ -1,9 +1,10 @@
 """`output_nonlinearity`: $y = h(w) + e$ with $h$ static and not affine."""
 
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, Float
 
-from ._base import AbstractEffect, StartContext
+from ._base import AbstractEffect, StartContext, output_half_range
 
 
 def output_map(
@@ -32,6 +33,24 @@ class OutputNonlinearityEffect(AbstractEffect):
 
     name = "output_nonlinearity"
     slots = ("out_q2", "out_q3", "out_lo", "out_hi", "out_db")
+    neutral = {
+        "out_q2": 0.0,
+        "out_q3": 0.0,
+        "out_lo": -np.inf,
+        "out_hi": np.inf,
+        "out_db": 0.0,
+    }
+    positive = ("out_db",)
+
+    def scales(self, ctx: StartContext) -> dict[str, float]:
+        half = output_half_range(ctx)
+        return {
+            "out_q2": 0.05,
+            "out_q3": 0.05,
+            "out_lo": 0.2 * half,
+            "out_hi": 0.2 * half,
+            "out_db": 0.05 * half,
+        }
 
     def starts(self, ctx: StartContext) -> list[dict[str, float]]:
         wq = ctx.w_quantiles

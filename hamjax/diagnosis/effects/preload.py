@@ -18,6 +18,10 @@ class PreloadEffect(AbstractEffect):
 
     name = "preload"
     slots = ("preload",)
+    neutral = {"preload": 0.0}
+
+    def scales(self, ctx: StartContext) -> dict[str, float]:
+        return {"preload": 0.1 * ctx.u_std}
 
     def starts(self, ctx: StartContext) -> list[dict[str, float]]:
         return [{"preload": 0.1 * ctx.u_std}]

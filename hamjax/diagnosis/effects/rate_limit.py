@@ -1,6 +1,7 @@
 """`rate_limit`: $v'$ follows $v$ with $|dv'/dt| \\le r$ (input units per second)."""
 
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, Float
 
 from ._base import AbstractEffect, StartContext
@@ -22,6 +23,11 @@ class RateLimitEffect(AbstractEffect):
 
     name = "rate_limit"
     slots = ("rate",)
+    neutral = {"rate": np.inf}
+    positive = ("rate",)
+
+    def scales(self, ctx: StartContext) -> dict[str, float]:
+        return {"rate": 0.1 * ctx.max_step / ctx.dt}
 
     def starts(self, ctx: StartContext) -> list[dict[str, float]]:
         r = ctx.max_step / ctx.dt

@@ -1,6 +1,7 @@
 """`saturation`: $u' = \\mathrm{clip}(F(v), u_{lo}, u_{hi})$ between $F$ and $G$."""
 
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, Float
 
 from ._base import AbstractEffect, StartContext, quantile_pair
@@ -21,6 +22,10 @@ class SaturationEffect(AbstractEffect):
 
     name = "saturation"
     slots = ("sat_lo", "sat_hi")
+    neutral = {"sat_lo": -np.inf, "sat_hi": np.inf}
+
+    def scales(self, ctx: StartContext) -> dict[str, float]:
+        return {"sat_lo": 0.2 * ctx.u_std, "sat_hi": 0.2 * ctx.u_std}
 
     def starts(self, ctx: StartContext) -> list[dict[str, float]]:
         """Limits at nominal-u quantiles: both light, both heavy, and one side

@@ -23,10 +23,60 @@ jax.config.update("jax_numpy_rank_promotion", "raise")
 SHARED = Path(__file__).resolve().parents[1].parent / "shared"
 
 
+def pytest_addoption(parser):
+    parser.addoption(
+        "--seeds",
+        type=int,
+        default=1,
+        metavar="N",
+        help="run every test that uses `getkey` under N seeds: HAMJAX_TEST_SEED "
+        "(default 0) + 0..N-1. The default, 1, draws one random seed per test "
+        "(or takes HAMJAX_TEST_SEED) and prints it.",
+    )
+
+
+def pytest_configure(config):
+    config.addinivalue_line(
+        "markers",
+        "randomised: draws from the `getkey` fixture (added automatically); "
+        "select with -m randomised for a seed sweep",
+    )
+    if config.getoption("seeds") < 1:
+        raise pytest.UsageError("--seeds must be at least 1")
+
+
+def pytest_generate_tests(metafunc):
+    """With ``--seeds N`` (N > 1), parametrise every `getkey` user over N seeds.
+
+    The seeds are deterministic (HAMJAX_TEST_SEED, default 0, plus 0..N-1), so a
+    sweep is reproducible and a failure's node id (``[seed=17]``) names the seed
+    to replay with ``HAMJAX_TEST_SEED=17``.
+    """
+    if "_getkey_seed" not in metafunc.fixturenames:
+        return
+    n = metafunc.config.getoption("seeds")
+    if n > 1:
+        base = int(os.environ.get("HAMJAX_TEST_SEED", 0))
+        seeds = [base + i for i in range(n)]
+        metafunc.parametrize("_getkey_seed", seeds, ids=[f"seed={s}" for s in seeds])
+
+
+def pytest_collection_modifyitems(items):
+    for item in items:
+        if "_getkey_seed" in getattr(item, "fixturenames", ()):
+            item.add_marker(pytest.mark.randomised)
+
+
 @pytest.fixture
-def getkey():
+def _getkey_seed():
+    """The seed of `getkey`: HAMJAX_TEST_SEED, else random (see ``--seeds``)."""
+    return int(os.environ.get("HAMJAX_TEST_SEED", random.randrange(2**31)))
+
+
+@pytest.fixture
+def getkey(_getkey_seed):
     """A fresh key per call; the seed is printed so a failure can be replayed."""
-    seed = int(os.environ.get("HAMJAX_TEST_SEED", random.randrange(2**31)))
+    seed = _getkey_seed
     print(f"getkey seed: {seed}")
     key = jr.key(seed)
 

@@ -47,6 +47,7 @@ def test_simulate_compiles_once_for_new_data(plant):
     doubled = eqx.tree_at(gain, plant, 2.0 * gain(plant))
     w3 = run(doubled, v1)
     assert not np.allclose(w1, w2)
+    # fixed keys 0 and 1; doubling the numerator is exact, the rest is reordering
     np.testing.assert_allclose(w3, 2.0 * w1, rtol=1e-12, atol=1e-12)
 
 
@@ -70,7 +71,8 @@ def test_noisy_trial_batch_compiles_once():
     y2 = batch(jr.key(1), v)
     assert y1.shape == y2.shape == (8, v.shape[0])
     assert not np.allclose(y1, y2)
-    # Realisation r does not depend on the batch: it equals the unbatched trial.
+    # Realisation r does not depend on the batch: it equals the unbatched trial
+    # (fixed key 0: the same draws every run).
     np.testing.assert_allclose(
         y1[3],
         hj.add_noise(

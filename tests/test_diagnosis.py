@@ -47,6 +47,7 @@ def _scan(step, v, param):
 
 
 def test_effects_neutral_exactly(getkey):
+    # Exact for any draw: each neutral effect is the identity by construction.
     v = jr.normal(getkey(), (200,))
     inf = jnp.inf
     assert jnp.array_equal(_scan(play_step, v, 0.0), v)
@@ -64,12 +65,17 @@ def test_play_operator_equals_core_backlash(getkey):
     v = jnp.repeat(jr.uniform(getkey(), (40,), minval=-1, maxval=1), 7)
     c = 0.37
     ref = hj.apply_nonlinearity(hj.Backlash.from_width(c, u0=v[0]), v)
+    # any draw: |v| <= 1, each step one clip to v +- c/2 (no accumulation), so the
+    # two differ by at most a few ulp(1.2) ~ 2.2e-16 each, below 1e-14
     assert np.allclose(_scan(play_step, v, c), ref, rtol=0, atol=1e-14)
 
 
 def test_effect_forms_against_numpy(getkey):
     v = np.asarray(jr.uniform(getkey(), (300,), minval=-2, maxval=2))
     w = 0.4
+    # Any draw: |v| <= 2, so one subtraction is off by at most ulp(2)/2 = 2.2e-16
+    # (< 1e-15). The rate limit's forms differ only on unsaturated steps (by an ulp);
+    # saturated steps carry that difference without growing it (< 1e-14).
     ref_dz = np.sign(v) * np.maximum(np.abs(v) - w, 0)
     assert np.allclose(dead_zone(jnp.asarray(v), w, w), ref_dz, atol=1e-15)
     ref_delay = np.r_[np.full(3, v[0]), v[:-3]]
@@ -115,6 +121,8 @@ PLANTS = [
 
 @pytest.mark.parametrize("plant", PLANTS)
 def test_augmented_at_neutral_is_nominal(plant, getkey):
+    # any draw: inputs are levels in [-1, 1]; the tolerances below are relative
+    # plus 1e-10 of the record's own peak (absolute part scaled by the data)
     est, val = _records(getkey())
     prep = prepare(plant, 0.05, est, val)
     ct = isinstance(plant.linear, hj.ContinuousTransferFunction)
@@ -164,6 +172,8 @@ def test_vmap_rows_equals_loop():
     one_row = jax.jit(simulate_row)
     for i, r in enumerate(rows):
         one = one_row(r.theta0, r, prep.arrays.v_est, prep.arrays)
+        # fixed key 1 (the same records each run); the outputs are O(1), so
+        # atol 1e-12 is ~1e4 ulp of the record's scale (vmap may fuse differently)
         assert np.allclose(batch[i], one, rtol=1e-12, atol=1e-12)
 
 

@@ -44,8 +44,11 @@ def test_results_depend_only_on_seed_and_index(chunk):
     got = run_monte_carlo(key, _trial, MonteCarloConfig(realisations=R, chunk=chunk))
     ref = _loop_reference(key, _trial, R)
     assert got["x"].shape == (R, 6) and got["count"].dtype == ref["count"].dtype
+    # Fixed key 3: the same draws in every run. A mean of 6 terms summed in another
+    # order differs by at most 6 eps max|x| (absolute: the mean can be near zero).
+    atol = 6 * np.finfo(float).eps * np.abs(ref["x"]).max()
     for name in ("mean", "x"):
-        np.testing.assert_allclose(got[name], ref[name], rtol=1e-12, atol=0)
+        np.testing.assert_allclose(got[name], ref[name], rtol=1e-12, atol=atol)
     np.testing.assert_array_equal(got["count"], ref["count"])
 
 
@@ -75,6 +78,8 @@ def test_module_trial_parameters_are_traced_not_static():
     config = MonteCarloConfig(realisations=5, chunk=5)
     a = run_monte_carlo(jr.key(0), Wrapped(Scale(jnp.array(1.0))), config)
     b = run_monte_carlo(jr.key(0), Wrapped(Scale(jnp.array(2.0))), config)
+    # Fixed key 0; doubling is exact in binary floating point, so only the order of
+    # the multiplications (gain * z) may differ: 1 ulp, within rtol 1e-14.
     np.testing.assert_allclose(b, 2 * a, rtol=1e-14)
 
 
@@ -92,13 +97,16 @@ def test_batched_trial_equals_vmap_and_simulate():
         u = np.asarray(backlash(v))
         w_scipy = scipy.signal.lfilter([0.0, 1.0, -2.0], [1.0, -1.5, 0.56], u)
         np.testing.assert_allclose(w, w_scipy, rtol=1e-10, atol=1e-10)
+        # Fixed key 5. The mean of 300 samples may lie near zero: allow its
+        # summation-order bound 300 eps mean|w| (absolute) besides rtol 1e-11.
+        atol = w.size * np.finfo(float).eps * np.abs(w).mean()
         for name, ref in (
             ("mean", w.mean()),
             ("rms", np.sqrt(np.mean(w**2))),
             ("max_abs", np.abs(w).max()),
         ):
-            np.testing.assert_allclose(looped[name][r], ref, rtol=1e-11)
-            np.testing.assert_allclose(batched[name][r], ref, rtol=1e-11)
+            np.testing.assert_allclose(looped[name][r], ref, rtol=1e-11, atol=atol)
+            np.testing.assert_allclose(batched[name][r], ref, rtol=1e-11, atol=atol)
 
 
 def test_static_nonlinearity_summary_matches_simulate(getkey):
@@ -108,6 +116,8 @@ def test_static_nonlinearity_summary_matches_simulate(getkey):
     v = jr.normal(getkey(), (200,))
     w = np.asarray(hj.simulate(plant, v))
     got = output_summary(plant, v, unroll=3)
+    # Any draw: a sum of 200 squares (positive terms) has relative error <= 200 u
+    # = 2.2e-14 in any order, so rtol 1e-12 holds without an absolute part.
     np.testing.assert_allclose(got["rms"], np.sqrt(np.mean(w**2)), rtol=1e-12)
 
 
@@ -265,10 +275,20 @@ def test_summarise_matches_closed_forms(getkey):
     x = np.asarray(jr.exponential(getkey(), (R, 2))) ** 2 + np.array([0.0, -2.0])
     s = summarise(x, truth)
     z = scipy.stats.norm.ppf(0.975)
-    np.testing.assert_allclose(s.mean, x.mean(0), rtol=1e-13)
-    np.testing.assert_allclose(s.bias, x.mean(0) - truth, rtol=1e-12)
+    # A sum of R terms in any order is within (R - 1) u sum|x_i| of the exact one
+    # (u = eps/2), so XLA's and NumPy's means differ by at most R eps mean|x|. That
+    # bound is absolute: the second column's mean (E[x] = 0) can be near zero, where
+    # a relative tolerance alone fails for some seeds (1.6e-13 for seed 2016057559).
+    # Any real bug (a wrong divisor, a missed term) is O(1/R), 1e10 times larger.
+    sum_atol = R * np.finfo(float).eps * np.abs(x).mean(0).max()  # the larger column
+    np.testing.assert_allclose(s.mean, x.mean(0), rtol=1e-13, atol=sum_atol)
+    np.testing.assert_allclose(s.bias, x.mean(0) - truth, rtol=1e-12, atol=sum_atol)
+    # Sums of squares have positive terms: relative error <= R u = 5.6e-14 each way,
+    # halved by the square root, so these relative tolerances hold for every draw.
     np.testing.assert_allclose(s.std, x.std(0, ddof=1), rtol=1e-13)
     np.testing.assert_allclose(s.mean_mcse, scipy.stats.sem(x, axis=0), rtol=1e-12)
+    # m4 >= var^2 (Jensen) and for squared exponentials (kurtosis ~ 100) m4 - var^2
+    # never cancels: the moments' ~1e-13 relative error stays below 1e-10.
     np.testing.assert_allclose(s.rmse, np.sqrt(((x - truth) ** 2).mean(0)), rtol=1e-13)
     m4 = scipy.stats.moment(x, 4, axis=0)
     var = x.var(0, ddof=1)
@@ -320,6 +340,9 @@ def test_loglog_slope_matches_linregress(getkey):
     errors = 3.0 * ns**-0.5 * np.exp(0.1 * np.asarray(jr.normal(getkey(), (6,))))
     fit = loglog_slope(ns, errors, level=0.9)
     ref = scipy.stats.linregress(np.log(ns), np.log(errors))
+    # For any draw the slope is -1/2 (standard error 0.035: noise 0.1 on six log
+    # points) and the intercept log 3 = 1.1 (standard error 0.2): neither comes
+    # near zero, so relative tolerances suffice.
     np.testing.assert_allclose(fit.slope, ref.slope, rtol=1e-12)
     np.testing.assert_allclose(fit.intercept, ref.intercept, rtol=1e-10, atol=1e-12)
     np.testing.assert_allclose(fit.stderr, ref.stderr, rtol=1e-10)
@@ -351,6 +374,8 @@ def test_loglog_slope_bootstrap_on_per_realisation_errors():
     e = z * ns**-0.5 * (1 + 0.1 * np.asarray(jr.normal(jr.key(6), (300, 4))))
     fit = loglog_slope(ns, e, key=jr.key(7), bootstrap=500, level=0.999)
     rmse = np.sqrt((e**2).mean(0))
+    # fixed keys 5, 6, 7 (a bootstrap interval that misses with probability 1e-3);
+    # the slope is about -1/2, far from zero, so rtol 1e-12 alone is safe
     np.testing.assert_allclose(
         fit.slope, scipy.stats.linregress(np.log(ns), np.log(rmse)).slope, rtol=1e-12
     )

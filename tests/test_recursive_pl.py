@@ -73,6 +73,8 @@ def test_regression_is_exact_on_paper_plant():
 
 
 def test_lagrange_polynomial_against_numpy_interpolation(getkey):
+    # Random levels 1..5 (two negated and shifted below -2): any two are close only
+    # rarely; the 1e-8 tolerances leave room for the quartic's conditioning.
     levels = np.sort(np.asarray(jr.uniform(getkey(), (4,), minval=1, maxval=5)))
     levels = np.r_[-levels[2:][::-1] - 1, levels[:2]]
     levels = np.sort(levels)
@@ -105,6 +107,8 @@ def test_normalised_gradient_against_loop(getkey, rho):
     _, hist = normalised_gradient(
         jnp.asarray(phi), jnp.asarray(y), theta0=jnp.asarray(theta0), rho=rho
     )
+    # Any draw: each step is a projection (norm-reducing), so rounding does not
+    # grow; rtol 1e-12 plus np.allclose's default atol 1e-8 for entries near zero.
     assert np.allclose(hist, _numpy_gradient(phi, y, theta0, rho), rtol=1e-12)
     assert np.all(np.linalg.norm(hist, axis=1) <= rho * (1 + 1e-12))
 
@@ -196,6 +200,8 @@ def test_svd_rule_ties_and_noise(getkey):
     bh, dh, _ = rank_one_decomposition(jnp.outer(jnp.array([-1.0, 1.0]), jnp.ones(4)))
     assert np.allclose(bh, [1 / np.sqrt(2), -1 / np.sqrt(2)])
     # Not rank 1 (Proposition 4.2): b d^T is the best rank-1 approximation.
+    # Any draw of a 3x4 normal matrix: entries O(1), a top-singular-value gap far
+    # above 1e-4 (probability ~ gap^2 of less), so the rank-1 terms agree to 1e-12.
     m = np.asarray(jr.normal(getkey(), (3, 4)))
     bh, dh, _ = rank_one_decomposition(jnp.asarray(m))
     u, s, vt = np.linalg.svd(m)

@@ -56,6 +56,7 @@ def test_periodic_staircase_structure(n):
     cycle = np.concatenate([levels, levels[-2:0:-1]])
     np.testing.assert_array_equal(v, np.tile(np.repeat(cycle, tau), 4))
     np.testing.assert_array_equal(v[: m * tau], v[m * tau : 2 * m * tau])  # periodic
+    # deterministic: t = arange * dt, one rounding
     np.testing.assert_allclose(t[-1], (v.shape[0] - 1) * 0.2, rtol=1e-14)
 
 
@@ -86,6 +87,7 @@ def test_fgi_period_samples_rounding(omega, dt, n):
     period, omega_used = hj.fgi_period_samples(omega, dt, n)
     m = 2 * n - 2
     assert isinstance(period, int) and period % m == 0 and period >= m
+    # deterministic: the same expression, at most 1 ulp apart (2.2e-16)
     assert omega_used == pytest.approx(2 * math.pi / (period * dt), rel=1e-15)
     # It is the nearest multiple of 2n-2 to the exact period 2 pi / (omega dt).
     exact = 2 * math.pi / (omega * dt)
@@ -107,6 +109,8 @@ def test_fgi_period_feeds_periodic_staircase():
 
 
 def test_random_staircase_holds_levels(getkey):
+    # Any draw: exact checks; 11 distinct uniform levels fail only if two of 11
+    # doubles coincide (probability ~ 55 * 2^-52).
     key = getkey()
     t, v = hj.random_staircase(key, n_samples=103, hold=10, low=-2.0, high=3.0, dt=0.5)
     assert v.shape == t.shape == (103,)
@@ -128,6 +132,7 @@ def test_prbs_levels_and_hold(getkey):
     assert set(np.unique(values)) == {-0.7, 0.7}
     blocks = values.reshape(100, 4)
     assert np.all(blocks == blocks[:, :1])
+    # 99 fair bit changes: 0 or 99 switches have probability 2^-98 for any seed
     switches = np.sum(blocks[1:, 0] != blocks[:-1, 0])
     assert 0 < switches < 99
 
@@ -136,6 +141,9 @@ def test_multisine_periodic_rms_and_spectrum(getkey):
     n, harmonics = 256, 20
     _, v = hj.multisine(getkey(), n_samples=n, harmonics=harmonics, rms=1.7)
     v = np.asarray(v)
+    # Any phases: the rms of 256 squares (positive terms) has relative error
+    # <= 256 u = 2.8e-14. The FFT bins are n A / 2 ~ 70 whatever the phases, so the
+    # FFT's ~1e-14 relative error is far below rtol 1e-10 / atol 1e-10.
     np.testing.assert_allclose(np.sqrt(np.mean(v**2)), 1.7, rtol=1e-12)
     spectrum = np.abs(np.fft.rfft(v))
     # Equal amplitudes on harmonics 1..H, nothing elsewhere: periodic in n samples.

@@ -14,6 +14,7 @@ from jax.sharding import Mesh, PartitionSpec
 from jaxtyping import Array, Bool, Float, Int
 
 from .._linalg import cholesky_solve
+from .._results import RESULTS
 from .augmented import (
     EFFECT_SLOTS,
     NL_TABULATED,
@@ -47,7 +48,7 @@ class RowFit(eqx.Module):
     params: Float[Array, "... S"]  # physical full parameter vector
     sse_est: Float[Array, "..."]
     y_val: Float[Array, "... L"]
-    result: Int[Array, "..."]  # 0 converged, 1 stopped at its step budget
+    result: RESULTS  # successful, or not_converged (stopped at its step budget)
     steps: Int[Array, "..."]  # Levenberg-Marquardt iterations taken
     lam: Float[Array, "..."]  # damping of the last proposed step (to continue)
     jtj: Float[Array, "... P P"]  # Gauss-Newton information J^T J (scaled output)
@@ -243,7 +244,7 @@ def fit_row(
         params=p,
         sse_est=jnp.where(jnp.isfinite(sse_est), sse_est, jnp.inf),
         y_val=y_val,
-        result=jnp.where(done, 0, 1),
+        result=RESULTS.where(done, RESULTS.successful, RESULTS.not_converged),
         steps=k,
         lam=lam,
         jtj=jtj,

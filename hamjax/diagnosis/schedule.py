@@ -23,10 +23,12 @@ from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 
+import equinox as eqx
 import jax
 import jax.tree_util as jtu
 import numpy as np
 
+from .._results import RESULTS
 from ..simulation.sharding import effective_chunk
 from .augmented import NL_TABULATED, Row, uses_memory
 from .fit import LAMBDA0, RowFit, fit_batch, theta_std
@@ -46,6 +48,7 @@ CONTINUE_CLASSES = 4
 # 2-4 cases ran in 59-72 s, 8 in 82 s, 16 in 91 s (same effects named in all).
 CASES_PER_BATCH = 4
 FIELDS = tuple(RowFit.__dataclass_fields__)
+SUCCESSFUL = int(RESULTS.successful._value)  # a converged fit's code on the host
 
 
 @dataclass
@@ -94,7 +97,7 @@ def finishing_items(c: int, prep: Prepared, fits: dict) -> list[Item]:
     out = [
         Item(c, k, fits["theta"][k], LAMBDA0, FINISH_STEPS, "finish", "stopped")
         for k in [i_pm, *lead]
-        if fits["result"][k] != 0
+        if fits["result"][k] != SUCCESSFUL
     ]
     restart = np.where(used, fits["theta"][lead[0]], 0.0)  # nominal part only
     out.append(Item(c, i_pm, restart, LAMBDA0, FINISH_STEPS, "finish", "lower"))
@@ -111,7 +114,7 @@ def merge(fits: dict, item: Item, new: dict) -> None:
     elif item.replace == "lower":  # a restart: kept only if strictly better
         take = new["sse_est"] < fits["sse_est"][k]
     else:  # a continuation: kept if it did not get worse
-        take = fits["result"][k] != 0 and new["sse_est"] <= fits["sse_est"][k]
+        take = fits["result"][k] != SUCCESSFUL and new["sse_est"] <= fits["sse_est"][k]
     if take:
         for name in FIELDS:
             fits[name][k] = new[name]
@@ -182,7 +185,11 @@ def run_queue(
             }
         merge(fits[c], item, new)
         spent = int(new["steps"])
-        if item.stage == "finish" and new["result"] != 0 and spent < item.budget:
+        if (
+            item.stage == "finish"
+            and new["result"] != SUCCESSFUL
+            and spent < item.budget
+        ):
             queues["more"].append(
                 Item(
                     c,
@@ -260,4 +267,9 @@ def run_batch(
             **(flags or {}),
         )
     )
-    return {name: np.asarray(getattr(fit, name)) for name in FIELDS}
+    return {name: _host(getattr(fit, name)) for name in FIELDS}
+
+
+def _host(x) -> np.ndarray:
+    """A fit field as NumPy (a `RESULTS` item as its integer codes)."""
+    return np.asarray(x._value if isinstance(x, eqx.EnumerationItem) else x)

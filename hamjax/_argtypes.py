@@ -24,21 +24,24 @@ def float_list(text: str) -> list[float]:
     return values
 
 
-def positive_float(text: str) -> float:
+def _parsed(text: str, parse, what: str):
     try:
-        x = float(text)
+        return parse(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+        raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}") from None
+
+
+def positive_float(text: str) -> float:
+    """A finite number > 0."""
+    x = _parsed(text, float, "a number")
     if not (math.isfinite(x) and x > 0):
         raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}")
     return x
 
 
 def positive_int(text: str) -> int:
-    try:
-        x = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+    """An integer >= 1."""
+    x = _parsed(text, int, "an integer")
     if x < 1:
         raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text!r}")
     return x

@@ -14,11 +14,11 @@ from helpers import run_on_two_devices
 
 import hamjax.diagnosis.fit as fit_module
 import hamjax.diagnosis.schedule as schedule
+from hamjax._results import RESULTS
 from hamjax.diagnosis.augmented import NL_TABULATED, slot_index, uses_memory
 from hamjax.diagnosis.fit import LAMBDA0, fit_batch, theta_std
 from hamjax.diagnosis.layout import N_MAX, prepare
 from hamjax.diagnosis.schedule import (
-    FIELDS,
     REFIT,
     finishing_items,
     merge,
@@ -92,7 +92,7 @@ def _all_rows(prep, steps):
     rows = _stack([r for _, r in prep.rows])
     cases = _stack([prep.arrays] * n)
     fit = fit_batch(rows, cases, np.full(n, steps), np.full(n, LAMBDA0))
-    return {name: np.array(getattr(fit, name)) for name in FIELDS}
+    return {k: np.array(x) for k, x in schedule.host_fields(fit).items()}
 
 
 @pytest.mark.slow
@@ -106,7 +106,8 @@ def test_resumed_fit_is_the_uninterrupted_fit():
     rows = _stack([r for _, r in prep.rows])
     cases = _stack([prep.arrays] * n)
     first = fit_batch(rows, cases, np.full(n, 5), np.full(n, LAMBDA0))
-    moving = np.asarray(first.result) == 1
+    # stopped at the 5-step budget, not converged
+    moving = np.asarray(first.result._value) == RESULTS.not_converged._value
     assert moving.any()
     resumed = fit_batch(
         eqx.tree_at(lambda r: r.theta0, rows, first.theta),
@@ -251,7 +252,7 @@ def test_reported_std_matches_the_monte_carlo_spread():
     rows = _stack([p.rows[k][1] for p in preps])
     cases = _stack([p.arrays for p in preps])
     fit = fit_batch(rows, cases, np.full(R, 200), np.full(R, LAMBDA0))
-    assert np.all(np.asarray(fit.result) == 0)
+    assert np.all(np.asarray(fit.result._value) == RESULTS.successful._value)
     used = idx < n_slots
     std = np.array([theta_std(fit.jtj[i], fit.s2[i], used)[j] for i in range(R)])
     spread = np.std(np.asarray(fit.theta)[:, j], ddof=1)

@@ -23,7 +23,6 @@ from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 
-import equinox as eqx
 import jax
 import jax.tree_util as jtu
 import numpy as np
@@ -267,9 +266,12 @@ def run_batch(
             **(flags or {}),
         )
     )
-    return {name: _host(getattr(fit, name)) for name in FIELDS}
+    return host_fields(fit)
 
 
-def _host(x) -> np.ndarray:
-    """A fit field as NumPy (a `RESULTS` item as its integer codes)."""
-    return np.asarray(x._value if isinstance(x, eqx.EnumerationItem) else x)
+def host_fields(fit: RowFit) -> dict[str, np.ndarray]:
+    """The fields of fitted rows as NumPy; `result` (a `RESULTS` item) as its
+    integer codes, `SUCCESSFUL` for a converged row."""
+    fields = {name: getattr(fit, name) for name in FIELDS}
+    fields["result"] = fields["result"]._value
+    return {name: np.asarray(x) for name, x in fields.items()}

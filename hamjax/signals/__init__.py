@@ -1,3 +1,4 @@
+from .designs import FGIDesign as FGIDesign
 from .impulse_pe import pe_impulse_sequence as pe_impulse_sequence
 from .random import (
     multisine as multisine,

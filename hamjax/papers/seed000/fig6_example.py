@@ -4,7 +4,6 @@ plant $G(s) = (s-10)/(s+1)^2$ with a curved backlash (Figs. 5, 6 and a Bode plot
 Used by `hamjax reproduce backlash-frequency` and by the demo.
 """
 
-import math
 from pathlib import Path
 
 import jax.numpy as jnp
@@ -78,21 +77,17 @@ def run_example(key, out: Path, *, noise, hold, omegas, periods):
     # Table 2 at each omega (Remark 2a), u reconstructed from the NBBI points.
     results, entries = [], []
     for i, omega in enumerate(omegas):
-        P, used = signals.fgi_period_samples(float(omega), dt, len(levels))
-        transient = math.ceil(hold / (P * dt))
-        _, vf = signals.periodic_staircase(
-            levels, period_samples=P, periods=transient + periods, dt=dt
+        design = signals.FGIDesign.settling(
+            levels, omega=omega, dt=dt, periods=periods, settle=hold
         )
+        _, vf = design.input()
         vf = jnp.concatenate([v0, vf])
         wf = simulation.simulate(plant, vf, dt=dt)
         yf = hm.add_noise(jr.fold_in(fgi_key, i), wf, hm.WhiteNoise(noise))
         res = identify_fgi(
             yf,
             settled.cycle_values,
-            period_samples=P,
-            periods=periods,
-            dt=dt,
-            start=v0.shape[0] + transient * P,
+            **design.identify_kwargs(v0.shape[0]),
             cycle_stderr=settled.uncertainty,
         )
         results.append(res)

@@ -9,7 +9,6 @@ difference is the NBBI error carried into $\\hat G$ through $(a_k, b_k)$:
 $\\delta G/G \\approx -\\delta c_k / c_k$. Expected: both errors $\\propto \\sigma$.
 """
 
-import math
 from pathlib import Path
 
 import jax.numpy as jnp
@@ -19,20 +18,19 @@ import numpy as np
 from ...._argtypes import float_list, positive_float, positive_int
 from ....identification.seed000.fgi_table2 import identify_fgi
 from ....identification.seed000.nbbi_table1 import identify_nbbi
-from ....io import write_json
-from ....models import ContinuousTransferFunction, Hammerstein, WhiteNoise, add_noise
+from ....models import WhiteNoise, add_noise
 from ....montecarlo.config import MonteCarloConfig
 from ....montecarlo.registry import StudyOption, option_values
 from ....montecarlo.runner import run_monte_carlo
 from ....montecarlo.statistics import loglog_slope
 from ....signals import (
-    fgi_period_samples,
+    FGIDesign,
     initialisation_step,
     nbbi_staircase,
-    periodic_staircase,
 )
 from ....simulation import simulate
-from ..border_shapes import cycle_points, straight
+from ..border_shapes import cycle_points
+from ._common import DT, LEVELS, OMEGA, close_study, study_plant
 
 
 NAME = "fgi-pipeline"
@@ -41,14 +39,13 @@ DESCRIPTION = (
 )
 DEFAULT_REALISATIONS = 1000
 DEFAULT_CHUNK = 100
-LEVELS = (-1.0, -1.0 / 3.0, 1.0 / 3.0, 1.0)
 
 
 OPTIONS = (
     StudyOption("noises", [0.01, 0.03, 0.1, 0.3, 1.0], "noise stds", float_list),
-    StudyOption("dt", 0.05, "sampling period (0.05)", positive_float),
+    DT,
     StudyOption("hold", 20.0, "NBBI hold N*Tr (20)", positive_float),
-    StudyOption("omega", 1.0, "base omega (1.0)", positive_float),
+    OMEGA,
     StudyOption("periods", 50, "FGI M (50)", positive_int),
 )
 
@@ -65,19 +62,17 @@ def run(key, *, realisations: int, chunk: int, out: Path, quiet: bool, args) -> 
         opts.periods,
     )
     levels = np.asarray(LEVELS)
-    backlash = straight(0.4)
-    G = ContinuousTransferFunction([1.0], [0.25, 1.0, 1.0])
-    plant = Hammerstein(backlash, G)
-    U = cycle_points(backlash, levels)
+    plant = study_plant()
+    G = plant.linear
+    U = cycle_points(plant.nonlinearity, levels)
     _, v0 = initialisation_step(levels, duration=hold, dt=dt)
     _, v1 = nbbi_staircase(levels, hold=hold, dt=dt)
     w_nbbi = simulate(plant, jnp.concatenate([v0, v1]), dt=dt)
-    P, used = fgi_period_samples(omega, dt, len(levels))
-    transient = math.ceil(hold / (P * dt))
-    _, vf = periodic_staircase(levels, period_samples=P, periods=transient + M, dt=dt)
+    design = FGIDesign.settling(levels, omega=omega, dt=dt, periods=M, settle=hold)
+    used = design.omega
+    _, vf = design.input()
     w_fgi = simulate(plant, jnp.concatenate([v0, vf]), dt=dt)
-    start = v0.shape[0] + transient * P
-    kw = dict(period_samples=P, periods=M, dt=dt, start=start, quadrature="rectangle")
+    kw = dict(**design.identify_kwargs(v0.shape[0]), quadrature="rectangle")
     g1 = complex(np.asarray(G.frequency_response(used)).item())
     n_harm = int(identify_fgi(w_fgi, U, **kw).harmonics.shape[0])
 
@@ -156,12 +151,4 @@ def run(key, *, realisations: int, chunk: int, out: Path, quiet: bool, args) -> 
     ax.set_xlabel("noise std sigma")
     ax.set_ylabel("RMS error")
     ax.set_title(f"NBBI -> FGI pipeline (R = {realisations}, k = 1, w = {used:.3g})")
-    ax.legend(fontsize=8)
-    ax.grid(alpha=0.3, which="both")
-    fig.tight_layout()
-    fig.savefig(Path(out) / "fgi_pipeline.png", dpi=110)
-    plt.close(fig)
-    summary["verdict"] = verdict
-    summary["headline"] = "; ".join(verdict)
-    write_json(Path(out) / "fgi_pipeline.json", summary)
-    return summary
+    return close_study(fig, ax, out, "fgi_pipeline", summary, verdict)

@@ -9,24 +9,23 @@ rule so that the discretisation floor (reported for both quadratures) is far bel
 the noise. Expected: $|\\hat G_M - G| \\propto M^{-1/2}$ for every kept harmonic.
 """
 
-import math
 from pathlib import Path
 
 import jax.numpy as jnp
 import jax.random as jr
 import numpy as np
 
-from ...._argtypes import int_list, positive_float
+from ...._argtypes import int_list
 from ....identification.seed000.fgi_table2 import identify_fgi
-from ....io import write_json
-from ....models import ContinuousTransferFunction, Hammerstein, WhiteNoise, add_noise
+from ....models import WhiteNoise, add_noise
 from ....montecarlo.config import MonteCarloConfig
 from ....montecarlo.registry import StudyOption, option_values
 from ....montecarlo.runner import run_monte_carlo
 from ....montecarlo.statistics import loglog_slope
-from ....signals import fgi_period_samples, initialisation_step, periodic_staircase
+from ....signals import FGIDesign, initialisation_step
 from ....simulation import simulate
-from ..border_shapes import cycle_points, straight
+from ..border_shapes import cycle_points
+from ._common import DT, LEVELS, OMEGA, close_study, noise_option, study_plant
 
 
 NAME = "fgi-rate"
@@ -36,13 +35,12 @@ DESCRIPTION = (
 )
 DEFAULT_REALISATIONS = 1000
 DEFAULT_CHUNK = 50
-LEVELS = (-1.0, -1.0 / 3.0, 1.0 / 3.0, 1.0)
 
 
 OPTIONS = (
-    StudyOption("noise", 0.3, "noise std (0.3)", float),
-    StudyOption("dt", 0.05, "sampling period (0.05)", positive_float),
-    StudyOption("omega", 1.0, "base omega (1.0)", positive_float),
+    noise_option(0.3),
+    DT,
+    OMEGA,
     StudyOption(
         "ms",
         [1, 2, 4, 8, 16, 32, 64, 128, 256, 512, 1000],
@@ -54,18 +52,15 @@ OPTIONS = (
 
 def setup(*, omega: float, dt: float, m_max: int):
     levels = np.asarray(LEVELS)
-    backlash = straight(0.4)
-    G = ContinuousTransferFunction([1.0], [0.25, 1.0, 1.0])
-    plant = Hammerstein(backlash, G)
-    U = cycle_points(backlash, levels)
-    P, used = fgi_period_samples(omega, dt, len(levels))
-    transient = math.ceil(10.0 / (P * dt))  # 10 s >> settling time of G
+    plant = study_plant()
+    G = plant.linear
+    U = cycle_points(plant.nonlinearity, levels)
+    # 10 s of transient >> the settling time of G
+    design = FGIDesign.settling(levels, omega=omega, dt=dt, periods=m_max, settle=10.0)
     _, v0 = initialisation_step(levels, duration=5.0, dt=dt)
-    _, v1 = periodic_staircase(
-        levels, period_samples=P, periods=transient + m_max, dt=dt
-    )
+    _, v1 = design.input()
     w = simulate(plant, jnp.concatenate([v0, v1]), dt=dt)
-    return G, U, P, used, v0.shape[0] + transient * P, w
+    return G, U, design.period_samples, design.omega, design.start(v0.shape[0]), w
 
 
 def run(key, *, realisations: int, chunk: int, out: Path, quiet: bool, args) -> dict:
@@ -142,12 +137,4 @@ def run(key, *, realisations: int, chunk: int, out: Path, quiet: bool, args) -> 
     ax.set_xlabel("M (periods averaged)")
     ax.set_ylabel(r"RMS $|\hat G_M(jk\omega) - G(jk\omega)|$")
     ax.set_title(f"FGI, Prop. 2 (R = {realisations}, omega = {used:.3g})")
-    ax.legend(fontsize=7)
-    ax.grid(alpha=0.3, which="both")
-    fig.tight_layout()
-    fig.savefig(Path(out) / "fgi_rate.png", dpi=110)
-    plt.close(fig)
-    summary["verdict"] = verdict
-    summary["headline"] = "; ".join(verdict)
-    write_json(Path(out) / "fgi_rate.json", summary)
-    return summary
+    return close_study(fig, ax, out, "fgi_rate", summary, verdict)

@@ -16,17 +16,17 @@ import jax.numpy as jnp
 import jax.random as jr
 import numpy as np
 
-from ...._argtypes import int_list, positive_float
+from ...._argtypes import int_list
 from ....identification.seed000.nbbi_table1 import identify_nbbi
-from ....io import write_json
-from ....models import ContinuousTransferFunction, Hammerstein, WhiteNoise, add_noise
+from ....models import WhiteNoise, add_noise
 from ....montecarlo.config import MonteCarloConfig
 from ....montecarlo.registry import StudyOption, option_values
 from ....montecarlo.runner import run_monte_carlo
 from ....montecarlo.statistics import loglog_slope
 from ....signals import initialisation_step, nbbi_staircase
 from ....simulation import simulate
-from ..border_shapes import cycle_points, straight
+from ..border_shapes import cycle_points
+from ._common import DT, LEVELS, close_study, noise_option, study_plant
 
 
 NAME = "nbbi-rate"
@@ -36,13 +36,12 @@ DESCRIPTION = (
 )
 DEFAULT_REALISATIONS = 1000
 DEFAULT_CHUNK = 50
-LEVELS = (-1.0, -1.0 / 3.0, 1.0 / 3.0, 1.0)
 T_R = 1.0
 
 
 OPTIONS = (
-    StudyOption("noise", 0.3, "noise std (0.3)", float),
-    StudyOption("dt", 0.05, "sampling period (0.05)", positive_float),
+    noise_option(0.3),
+    DT,
     StudyOption(
         "ns",
         [3, 6, 12, 25, 50, 100, 200, 400, 1000],
@@ -55,9 +54,8 @@ OPTIONS = (
 def make_trial(ns, *, noise: float, dt: float):
     """`trial(key) -> {"plain": (n_N, 2n-2), "settled": ...}` signed point errors."""
     levels = np.asarray(LEVELS)
-    backlash = straight(0.4)
-    plant = Hammerstein(backlash, ContinuousTransferFunction([1.0], [0.25, 1.0, 1.0]))
-    truth = cycle_points(backlash, levels)
+    plant = study_plant()
+    truth = cycle_points(plant.nonlinearity, levels)
     records = []
     for N in ns:
         hold = N * T_R
@@ -104,7 +102,7 @@ def run(key, *, realisations: int, chunk: int, out: Path, quiet: bool, args) -> 
     # Theory: bias b/N with b = RMS of jumps * (sum of time constants = 1 s);
     # noise s^2/N with s^2 = sigma^2 dt / Tr.
     levels = np.asarray(LEVELS)
-    truth = np.asarray(cycle_points(straight(0.4), levels))
+    truth = np.asarray(cycle_points(study_plant().nonlinearity, levels))
     jumps = np.diff(np.r_[truth[0], truth])
     b = float(np.sqrt(np.mean(jumps**2)) * 1.0 / T_R)
     s2 = noise**2 * dt / T_R
@@ -163,11 +161,6 @@ def run(key, *, realisations: int, chunk: int, out: Path, quiet: bool, args) -> 
     ax.set_xlabel("N (hold = N Tr)")
     ax.set_ylabel("RMS error of the 2n-2 points")
     ax.set_title(f"NBBI, Prop. 1 (R = {realisations}); crossover N* = {n_star:.0f}")
-    ax.legend(fontsize=8)
-    ax.grid(alpha=0.3, which="both")
-    fig.tight_layout()
-    fig.savefig(Path(out) / "nbbi_rate.png", dpi=110)
-    plt.close(fig)
     p, s = summary["plain"]["fits"], summary["settled"]["fits"]
     verdict = []
     for label, fit, want in (
@@ -183,7 +176,4 @@ def run(key, *, realisations: int, chunk: int, out: Path, quiet: bool, args) -> 
                 f"{label}: slope {fit['slope']:.3f} CI [{fit['ci'][0]:.3f}, "
                 f"{fit['ci'][1]:.3f}] vs {want} -> {'consistent' if ok else 'NOT in CI'}"
             )
-    summary["verdict"] = verdict
-    summary["headline"] = "; ".join(verdict)
-    write_json(Path(out) / "nbbi_rate.json", summary)
-    return summary
+    return close_study(fig, ax, out, "nbbi_rate", summary, verdict)

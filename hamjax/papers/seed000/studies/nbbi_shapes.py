@@ -24,19 +24,19 @@ from ...._results import RESULTS
 from ....identification.seed000.fgi_table2 import identify_fgi
 from ....identification.seed000.nbbi_table1 import identify_nbbi
 from ....io import write_json
-from ....models import ContinuousTransferFunction, Hammerstein, WhiteNoise, add_noise
+from ....models import Hammerstein, WhiteNoise, add_noise
 from ....montecarlo.config import MonteCarloConfig
 from ....montecarlo.registry import StudyOption, option_values
 from ....montecarlo.runner import run_monte_carlo
 from ....signals import (
-    fgi_period_samples,
+    FGIDesign,
     initialisation_step,
     nbbi_staircase,
-    periodic_staircase,
 )
 from ....signals.staircase import staircase_cycle_levels
 from ....simulation import simulate
 from ..border_shapes import SHAPES, cycle_points
+from ._common import DT, noise_option, study_linear
 
 
 NAME = "nbbi-shapes"
@@ -49,10 +49,10 @@ DEFAULT_CHUNK = 100
 
 
 OPTIONS = (
-    StudyOption("noise", 0.05, "noise std (0.05)", float),
+    noise_option(0.05),
     StudyOption("levels", 9, "n levels on [-1, 1] (9)", positive_int),
     StudyOption("hold", 20.0, "hold N*Tr (20)", positive_float),
-    StudyOption("dt", 0.05, "sampling period (0.05)", positive_float),
+    DT,
 )
 
 
@@ -65,21 +65,15 @@ def run(key, *, realisations: int, chunk: int, out: Path, quiet: bool, args) -> 
     noise, n, hold, dt = opts.noise, opts.levels, opts.hold, opts.dt
     levels = np.linspace(-1.0, 1.0, n)
     cyc = np.asarray(staircase_cycle_levels(levels))
-    G = ContinuousTransferFunction([1.0], [0.25, 1.0, 1.0])
+    G = study_linear()
     _, v0 = initialisation_step(levels, duration=hold, dt=dt)
     _, v1 = nbbi_staircase(levels, hold=hold, dt=dt)
     v_nbbi = jnp.concatenate([v0, v1])
-    P, used = fgi_period_samples(1.0, dt, n)
-    transient = math.ceil(hold / (P * dt))
-    _, vf = periodic_staircase(levels, period_samples=P, periods=transient + 20, dt=dt)
+    design = FGIDesign.settling(levels, omega=1.0, dt=dt, periods=20, settle=hold)
+    used = design.omega
+    _, vf = design.input()
     v_fgi = jnp.concatenate([v0, vf])
-    fkw = dict(
-        period_samples=P,
-        periods=20,
-        dt=dt,
-        start=v0.shape[0] + transient * P,
-        quadrature="rectangle",
-    )
+    fkw = dict(**design.identify_kwargs(v0.shape[0]), quadrature="rectangle")
     g_true = np.asarray(G.frequency_response(jnp.arange(1, 65) * used))
     names = sorted(SHAPES)
     setups, summary_shapes = [], {}

@@ -24,11 +24,10 @@ from ....identification.seed001 import (
     recover_parameters,
     regressor,
 )
-from ....montecarlo.config import MonteCarloConfig
 from ....montecarlo.registry import StudyOption, option_values
-from ....montecarlo.runner import run_monte_carlo
 from ....montecarlo.storage import atomic_write_bytes
 from ....simulation import simulate
+from ..._study import run_realisations
 from ..plants import pe_input, random_dead_zone_or_preload
 
 
@@ -121,13 +120,12 @@ def run(key, *, realisations: int, chunk: int, out: Path, quiet: bool, args) -> 
     out = Path(out)
     per_order, samples, excitation = {}, {}, {}
     for n in orders:
-        config = MonteCarloConfig(
-            realisations=realisations, chunk=chunk, name=f"{NAME}-n{n}"
-        )
-        res = run_monte_carlo(
+        res = run_realisations(
             jr.fold_in(key, n),
             ConvergenceTrial(order=n, periods=periods),
-            config,
+            name=f"{NAME}-n{n}",
+            realisations=realisations,
+            chunk=chunk,
             out=out / f"realisations_n{n}",
             quiet=quiet,
             metadata={

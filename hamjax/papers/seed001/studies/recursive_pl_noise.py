@@ -30,12 +30,11 @@ from ....identification.seed001 import (
     regressor,
 )
 from ....models import PiecewiseLinear
-from ....montecarlo.config import MonteCarloConfig
 from ....montecarlo.registry import StudyOption, option_values
-from ....montecarlo.runner import run_monte_carlo
 from ....montecarlo.statistics import loglog_slope
 from ....montecarlo.storage import atomic_write_bytes
 from ....simulation import simulate
+from ..._study import run_realisations
 from ..plants import RecursivePLCase, paper_case, pe_input
 
 
@@ -151,11 +150,12 @@ def run(key, *, realisations: int, chunk: int, out: Path, quiet: bool, args) -> 
     n_time = v.shape[0]
     checkpoints = tuple(int(n_time // k) for k in (16, 4, 1))
     trial = NoiseTrial(case, v, w, jnp.asarray(stds), checkpoints)
-    config = MonteCarloConfig(realisations=realisations, chunk=chunk, name=NAME)
-    res = run_monte_carlo(
+    res = run_realisations(
         key,
         trial,
-        config,
+        name=NAME,
+        realisations=realisations,
+        chunk=chunk,
         out=out / "realisations",
         quiet=quiet,
         metadata={"seed": getattr(args, "seed", None), "periods": periods},

@@ -20,11 +20,10 @@ import numpy as np
 
 from ...._argtypes import positive_int
 from ....identification.seed001 import normalised_gradient_convergence, regressor
-from ....montecarlo.config import MonteCarloConfig
 from ....montecarlo.registry import StudyOption, option_values
-from ....montecarlo.runner import run_monte_carlo
 from ....montecarlo.storage import atomic_write_bytes
 from ....simulation import simulate
+from ..._study import run_realisations
 from ..plants import paper_case, pe_input
 
 
@@ -108,11 +107,12 @@ def run(key, *, realisations: int, chunk: int, out: Path, quiet: bool, args) -> 
         jnp.asarray(scales),
         jnp.array([s is None for s in START_SCALES]),
     )
-    config = MonteCarloConfig(realisations=realisations, chunk=chunk, name=NAME)
-    res = run_monte_carlo(
+    res = run_realisations(
         key,
         trial,
-        config,
+        name=NAME,
+        realisations=realisations,
+        chunk=chunk,
         out=out / "realisations",
         quiet=quiet,
         metadata={"seed": getattr(args, "seed", None), "periods": periods},

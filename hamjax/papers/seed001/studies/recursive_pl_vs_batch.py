@@ -23,13 +23,12 @@ from ....identification.seed001 import (
     normalised_gradient_convergence,
     regressor,
 )
-from ....montecarlo.config import MonteCarloConfig
 from ....montecarlo.registry import StudyOption, option_values
-from ....montecarlo.runner import run_monte_carlo
 from ....montecarlo.statistics import summarise
 from ....montecarlo.storage import atomic_write_bytes
 from ....montecarlo.timing import time_per_call
 from ....simulation import simulate
+from ..._study import run_realisations
 from ..plants import paper_case, pe_input
 
 
@@ -100,11 +99,12 @@ def run(key, *, realisations: int, chunk: int, out: Path, quiet: bool, args) -> 
     std = float(jnp.sqrt(jnp.mean(w**2))) * 10 ** (-snr / 20)
     theta_star = case.theta_star()
     trial = CompareTrial(v, w, jnp.asarray(std), theta_star)
-    config = MonteCarloConfig(realisations=realisations, chunk=chunk, name=NAME)
-    res = run_monte_carlo(
+    res = run_realisations(
         key,
         trial,
-        config,
+        name=NAME,
+        realisations=realisations,
+        chunk=chunk,
         out=out / "realisations",
         quiet=quiet,
         metadata={"seed": getattr(args, "seed", None), "periods": periods, "snr": snr},

@@ -27,7 +27,7 @@ from hamjax.refinement import (
 U_TRUE = np.array([-0.8, -0.3, 0.3, 0.8, 0.35, -0.25])
 
 
-def _small(settle=10, periods=(4, 3)):
+def _small(settle=10, periods=(4, 3), *, average=True):
     blocks = (
         FGIBlock(period_samples=24, periods=periods[0], start=30, harmonics=(1, 2)),
         FGIBlock(period_samples=12, periods=periods[1], start=150, harmonics=(1,)),
@@ -39,6 +39,7 @@ def _small(settle=10, periods=(4, 3)):
         settle_samples=settle,
         blocks=blocks,
         dt=0.1,
+        average_replicates=average,
     )
     g = [np.array([0.9 - 0.3j, 0.5 - 0.6j]), np.array([0.4 - 0.7j])]
     return p, p.pack(U_TRUE, g)
@@ -47,7 +48,7 @@ def _small(settle=10, periods=(4, 3)):
 def test_predict_matches_the_fourier_series_of_the_staircase():
     # Oracle: y = mean(U) + sum_k Re(G_k c_k e^{jkwt}), with c_k of Eq. (13) by a
     # fine midpoint rule (independent of segment_weights), error O(h^2) ~ 1e-9.
-    p, theta = _small()
+    p, theta = _small(average=False)
     y = np.asarray(p.predict(theta, None))
     per = 20
     np.testing.assert_allclose(y[: 6 * per], np.repeat(U_TRUE, per), atol=1e-14)
@@ -124,6 +125,31 @@ def test_noise_free_recovery_through_the_simulator():
     # about |G(j(P-k)w) c_(P-k)| / |G(jkw) c_k| (|G| ~ 3e-4 at (P-k)w), up to ~1e-6
     # at k = 7 here; the model-generated case above checks 1e-8.
     np.testing.assert_allclose(res.theta, truth, rtol=5e-6, atol=1e-9)
+
+
+def test_averaged_replicates_give_the_same_estimate_and_bound():
+    # sum_j (y_j - mu)^2 = sum_j (y_j - ybar)^2 + n (ybar - mu)^2: same minimiser,
+    # same J^T J.
+    full, theta = _small(average=False)
+    avg, _ = _small()
+    rng = np.random.default_rng(1)
+    y_nbbi = 0.1 * rng.standard_normal(200)
+    y_fgi = 0.1 * rng.standard_normal(200)
+    y_nbbi[5:185] += np.repeat(U_TRUE, 30)
+    w = np.asarray(full.predict(theta, None))
+    y_fgi[30:126] += w[120:216]
+    y_fgi[150:186] += w[216:]
+    results = []
+    for p in (full, avg):
+        y = p.select(y_nbbi, y_fgi)
+        r = refine(p, theta, y, y)
+        results.append((r.theta, cramer_rao_bound(p, theta, y, 0.1)))
+    # equal to the solver tolerance (rtol = atol = 1e-10 on the steps)
+    np.testing.assert_allclose(results[0][0], results[1][0], atol=1e-8)
+    np.testing.assert_allclose(results[0][1], results[1][1], rtol=1e-9, atol=1e-14)
+    assert avg.n_samples == 6 + 24 + 12
+    s2 = float(avg.replicate_noise_variance(y_nbbi, y_fgi))
+    assert abs(s2 - 0.01) < 0.003  # ~300 degrees of freedom
 
 
 def test_gradients_match_finite_differences():
@@ -346,3 +372,22 @@ def test_contract_check_nbbi_fgi_passes(shared_dir):
         timeout=600,
     )
     assert out.returncode == 0, out.stdout + out.stderr
+
+
+@pytest.mark.slow
+def test_study_refinement_fgi_tiny(tmp_path, mplcleanup):
+    out = tmp_path / "study"
+    argv = ["--realisations", "2", "--chunk", "2", "--quiet", "--out", str(out)]
+    tiny = ["--hold", "4", "--dt", "0.05", "--periods", "2,3", "--snrs", "30"]
+    assert main(["study", "refinement-fgi", *argv, *tiny, "--no-timing"]) == 0
+    summary = json.loads((out / "refinement_fgi.json").read_text())
+    config = summary["configs"][0]
+    assert config["refined_failure_rate"] == 0.0
+    assert len(config["refined"]["efficiency"]) == len(summary["parameters"])
+    assert {"closed", "settled", "refined"} == set(config["per_harmonic"])
+    # the plain average (5) at a 4 s hold is biased by the transient; the fit of
+    # the settled holds is not
+    u_closed = np.asarray(config["closed_form"]["rmse"][:6])
+    u_refined = np.asarray(config["refined"]["rmse"][:6])
+    assert np.all(u_refined < u_closed)
+    assert (out / "refinement_fgi_rmse.png").stat().st_size > 0

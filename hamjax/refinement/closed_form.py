@@ -227,7 +227,8 @@ def refine_fgi_result(
     """Joint output-error fit of FGI's $G(jk\\omega)$ (every harmonic of
     `closed_form["frequency_response"]`) and the border points $U_i$ to the NBBI
     and FGI records, started from the closed form (`cycle_values`, the $U_i$ that
-    FGI used, and its $G$); see `FGIFrequencyParametrisation` ($G(0) = 1$
+    FGI used, and its $G$) or from the settled closed form
+    (`FGIFrequencyParametrisation.initial_theta`), whichever fits better; see `FGIFrequencyParametrisation` ($G(0) = 1$
     eliminated). Standard errors come from the Fisher information at the refined
     estimate with $\\hat\\sigma$ from the replicates (`replicate_noise_variance`).
 
@@ -283,10 +284,18 @@ def refine_fgi_result(
         blocks=fgi_blocks,
         dt=dt,
     )
-    y = p.select(np.asarray(y_nbbi, dtype=float), np.asarray(y_fgi, dtype=float))
-    theta0 = p.pack(np.asarray(cycle_values, dtype=float), starts)
+    y_nbbi = np.asarray(y_nbbi, dtype=float)
+    y_fgi = np.asarray(y_fgi, dtype=float)
+    y = p.select(y_nbbi, y_fgi)
+    # The closed form's U_i may carry the plain average's transient bias, which
+    # makes a poor start; the settled start (`initial_theta`) is used where its
+    # residual is smaller.
+    given = p.pack(np.asarray(cycle_values, dtype=float), starts)
+    settled = p.initial_theta(y_nbbi, y_fgi)
+    rss = [float(jnp.sum((y - p.predict(t, y)) ** 2)) for t in (given, settled)]
+    theta0 = settled if not rss[0] <= rss[1] else given
     res = refine(p, theta0, y, y, options=options, throw=False)
-    sigma = jnp.sqrt(p.replicate_noise_variance(y))
+    sigma = jnp.sqrt(p.replicate_noise_variance(y_nbbi, y_fgi))
     se = np.sqrt(np.diag(np.asarray(cramer_rao_bound(p, res.theta, y, sigma))))
     est = np.asarray(res.theta)
     cycle_levels = np.concatenate([levels_np, levels_np[-2:0:-1]])  # Eq. (4a-b)
@@ -325,6 +334,5 @@ def refine_fgi_result(
         "result": _result_name(res.result),
         "steps": int(res.steps),
         "noise_std": float(sigma),
-        "noise_std_residual": float(jnp.sqrt(res.noise_variance)),
-        "fitted_samples": int(p.n_samples),
+        "fitted_samples": int(p.n_record_samples),
     }

@@ -84,6 +84,13 @@ class FGIFrequencyParametrisation(AbstractParametrisation):
     - `settle_samples`: samples left out at the start of each hold.
     - `blocks`: the `FGIBlock`s.
     - `dt`: sampling period (s) of the FGI record.
+    - `average_replicates`: fit the sufficient statistics instead of the samples:
+      each hold's mean of its $N_s$ settled samples and each block's trans-period
+      average (20) over its $M$ periods, weighted by $\sqrt{N_s}$ and $\sqrt{M}$.
+      Since $\sum_j (y_j - \mu)^2 = \sum_j (y_j - \bar y)^2 + n(\bar y - \mu)^2$,
+      the criterion differs from the per-sample one by a constant, so the estimate
+      and the Fisher information $J^\top J/\sigma^2$ are the same, at a cost of
+      $2n-2 + \sum P$ residuals instead of $(2n-2)N_s + \sum MP$.
     """
 
     weights: tuple[Complex[Array, "k m"], ...]
@@ -94,6 +101,7 @@ class FGIFrequencyParametrisation(AbstractParametrisation):
     settle_samples: int = eqx.field(static=True)
     blocks: tuple[FGIBlock, ...] = eqx.field(static=True)
     dt: float = eqx.field(static=True)
+    average_replicates: bool = eqx.field(static=True)
 
     def __init__(
         self,
@@ -104,6 +112,7 @@ class FGIFrequencyParametrisation(AbstractParametrisation):
         settle_samples: int,
         blocks: Sequence[FGIBlock],
         dt: float,
+        average_replicates: bool = True,
     ):
         self.n_levels = int(n_levels)
         self.nbbi_start = int(nbbi_start)
@@ -111,6 +120,7 @@ class FGIFrequencyParametrisation(AbstractParametrisation):
         self.settle_samples = int(settle_samples)
         self.blocks = tuple(blocks)
         self.dt = float(dt)
+        self.average_replicates = bool(average_replicates)
         m = 2 * self.n_levels - 2
         weights, phasors = [], []
         for b in self.blocks:
@@ -175,6 +185,13 @@ class FGIFrequencyParametrisation(AbstractParametrisation):
     @property
     def n_samples(self) -> int:
         """Length of `select`'s output and of `predict`'s."""
+        if self.average_replicates:
+            return self.n_cycle + sum(b.period_samples for b in self.blocks)
+        return self.n_record_samples
+
+    @property
+    def n_record_samples(self) -> int:
+        """Samples of the two records that enter the fit (averaged or not)."""
         per = self.hold_samples - self.settle_samples
         return self.n_cycle * per + sum(
             b.periods * b.period_samples for b in self.blocks
@@ -189,10 +206,23 @@ class FGIFrequencyParametrisation(AbstractParametrisation):
     def select(
         self, y_nbbi: Float[ArrayLike, " time_nbbi"], y_fgi: Float[ArrayLike, " time"]
     ) -> Signal:
-        """The fitted samples of both records, in `predict`'s order.
+        """The data fitted from both records, in `predict`'s order: the samples,
+        or their weighted averages (`average_replicates`).
 
         **Raises:** `ValueError` if a record is too short for the design.
         """
+        holds, periods = self._replicates(y_nbbi, y_fgi)
+        if not self.average_replicates:
+            return jnp.concatenate(
+                [holds.reshape(-1), *(r.reshape(-1) for r in periods)]
+            )
+        parts = [math.sqrt(holds.shape[1]) * jnp.mean(holds, axis=1)]
+        for r in periods:
+            parts.append(math.sqrt(r.shape[0]) * jnp.mean(r, axis=0))  # Eq. (20)
+        return jnp.concatenate(parts)
+
+    def _replicates(self, y_nbbi, y_fgi):
+        """Settled samples `(holds, per)` and, per block, `(periods, period)`."""
         y_nbbi = jnp.asarray(y_nbbi, dtype=float)
         y_fgi = jnp.asarray(y_fgi, dtype=float)
         need = self.nbbi_start + self.n_cycle * self.hold_samples
@@ -201,7 +231,8 @@ class FGIFrequencyParametrisation(AbstractParametrisation):
                 f"the NBBI record has shape {y_nbbi.shape}; the staircase needs {need} "
                 "samples"
             )
-        parts = [y_nbbi[self.nbbi_indices()]]
+        holds = y_nbbi[self.nbbi_indices()].reshape(self.n_cycle, -1)
+        periods = []
         for b in self.blocks:
             end = b.start + b.periods * b.period_samples
             if y_fgi.ndim != 1 or y_fgi.shape[0] < end:
@@ -209,8 +240,8 @@ class FGIFrequencyParametrisation(AbstractParametrisation):
                     f"the FGI record has shape {y_fgi.shape}; the block at sample "
                     f"{b.start} needs {end} samples"
                 )
-            parts.append(y_fgi[b.start : end])
-        return jnp.concatenate(parts)
+            periods.append(y_fgi[b.start : end].reshape(b.periods, b.period_samples))
+        return holds, periods
 
     def _split(self, theta: Params):
         m = self.n_cycle
@@ -231,14 +262,17 @@ class FGIFrequencyParametrisation(AbstractParametrisation):
         del v  # the design fixes where each fitted sample lies
         u, g = self._split(theta)
         per = self.hold_samples - self.settle_samples
+        avg = self.average_replicates
         # Eq. (5) in steady state with G(0) = 1: y = U_i in hold i.
-        parts = [jnp.repeat(u, per)]
+        parts = [math.sqrt(per) * u if avg else jnp.repeat(u, per)]
         mean = jnp.mean(u)  # G(0) a_0 / 2 with G(0) = 1, equal segments
         uc = u.astype(jnp.complex128)
         for b, W, E, gb in zip(self.blocks, self.weights, self.phasors, g, strict=True):
             c = W @ uc  # Eq. (13): c_k = a_k - j b_k of the staircase of the U_i
             one = mean + jnp.real(E @ (gb * c))  # steady state, cf. (22)-(26)
-            parts.append(jnp.tile(one, b.periods))
+            parts.append(
+                math.sqrt(b.periods) * one if avg else jnp.tile(one, b.periods)
+            )
         return jnp.concatenate(parts)
 
     def to_physical(self, theta: Params) -> Float[Array, " n_physical"]:
@@ -272,23 +306,37 @@ class FGIFrequencyParametrisation(AbstractParametrisation):
     def is_valid(self, theta: Params) -> Bool[Array, ""]:
         return jnp.all(jnp.isfinite(theta))
 
-    def replicate_noise_variance(self, y: Float[ArrayLike, " n"]) -> Float[Array, ""]:
+    def initial_theta(
+        self, y_nbbi: Float[ArrayLike, " time_nbbi"], y_fgi: Float[ArrayLike, " time"]
+    ) -> Params:
+        """A start from the fitted data alone: $U_i$ the mean of the settled samples
+        of hold $i$ (NBBI's settled average (5)), then $G(jk\\omega) = (\\alpha_k -
+        j\\beta_k)/(a_k - j b_k)$ (25)-(26) with (22) on the trans-period average
+        (20) and (13) of those $U_i$. Free of the plain average's transient bias,
+        so the fit needs a few steps only.
+        """
+        holds, periods = self._replicates(y_nbbi, y_fgi)
+        u = jnp.mean(holds, axis=1)
+        uc = u.astype(jnp.complex128)
+        g = []
+        for r, W, E in zip(periods, self.weights, self.phasors, strict=True):
+            y_f = jnp.mean(r, axis=0).astype(jnp.complex128)  # Eq. (20)
+            coeff = (2.0 / r.shape[1]) * (jnp.conj(E).T @ y_f)  # Eq. (22), rectangle
+            g.append(coeff / (W @ uc))  # Eq. (25)-(26)
+        return self.pack(u, g)
+
+    def replicate_noise_variance(
+        self, y_nbbi: Float[ArrayLike, " time_nbbi"], y_fgi: Float[ArrayLike, " time"]
+    ) -> Float[Array, ""]:
         """$\\hat\\sigma^2$ from the replicates alone (model-free, white noise): the
         spread of the settled NBBI samples about their hold means and of the FGI
         periods about their average (20), pooled. Unlike rss/(N-p), it is not
         inflated by the harmonics the model leaves out.
         """
-        y = jnp.asarray(y, dtype=float)
-        per = self.hold_samples - self.settle_samples
-        m = self.n_cycle
-        holds = y[: m * per].reshape(m, per)
+        holds, periods = self._replicates(y_nbbi, y_fgi)
         ss = jnp.sum((holds - jnp.mean(holds, axis=1, keepdims=True)) ** 2)
-        dof = m * (per - 1)
-        off = m * per
-        for b in self.blocks:
-            n = b.periods * b.period_samples
-            rec = y[off : off + n].reshape(b.periods, b.period_samples)
-            ss = ss + jnp.sum((rec - jnp.mean(rec, axis=0, keepdims=True)) ** 2)
-            dof += (b.periods - 1) * b.period_samples
-            off += n
+        dof = holds.shape[0] * (holds.shape[1] - 1)
+        for r in periods:
+            ss = ss + jnp.sum((r - jnp.mean(r, axis=0, keepdims=True)) ** 2)
+            dof += (r.shape[0] - 1) * r.shape[1]
         return ss / max(dof, 1)

@@ -79,6 +79,7 @@ def test_noise_free_recovery_from_a_perturbed_start():
     assert float(res.rss) < 1e-20
 
 
+@pytest.mark.slow
 def test_noise_free_recovery_through_the_simulator():
     # A real Hammerstein simulation (fast G, straight backlash): NBBI holds settle
     # to round-off after the left-out half and FGI's steady state holds exactly,
@@ -152,6 +153,7 @@ def test_averaged_replicates_give_the_same_estimate_and_bound():
     assert abs(s2 - 0.01) < 0.003  # ~300 degrees of freedom
 
 
+@pytest.mark.slow
 def test_gradients_match_finite_differences():
     p, theta = _small()
     J = np.asarray(jax.jacfwd(p.predict)(theta, None))

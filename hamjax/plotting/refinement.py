@@ -67,7 +67,9 @@ def plot_refinement_study(summary: dict, *, which: str = "rmse") -> Figure:
                     ax.errorbar(
                         x,
                         y,
-                        yerr=[np.clip(y - lo, 0, None), np.clip(hi - y, 0, None)],
+                        # A tiny R leaves the upper end unbounded (MSE - 1.96 MCSE
+                        # <= 0): clip it to the axis, which stops at 1.3.
+                        yerr=[np.clip(y - lo, 0, 10), np.clip(hi - y, 0, 10)],
                         fmt=style,
                         color=colour,
                         marker="o",

@@ -4,6 +4,7 @@ from .backlash_path import (
     cycle_positions as cycle_positions,
 )
 from .closed_form import (
+    refine_fgi_result as refine_fgi_result,
     refine_nbbi_result as refine_nbbi_result,
     refine_recursive_pl_result as refine_recursive_pl_result,
 )
@@ -12,6 +13,10 @@ from .crlb import (
     fisher_information as fisher_information,
     output_jacobian as output_jacobian,
     standard_errors as standard_errors,
+)
+from .fgi_frequency import (
+    FGIBlock as FGIBlock,
+    FGIFrequencyParametrisation as FGIFrequencyParametrisation,
 )
 from .impulse_table import ImpulseTableParametrisation as ImpulseTableParametrisation
 from .options import RefinementOptions as RefinementOptions

@@ -15,6 +15,7 @@ from ..identification.seed001 import dead_zone_rule, preload_rule, symmetric_rul
 from .backlash_path import BacklashPathParametrisation
 from .backlash_start import initial_backlash_theta
 from .crlb import cramer_rao_bound
+from .fgi_frequency import FGIBlock, FGIFrequencyParametrisation
 from .impulse_table import ImpulseTableParametrisation
 from .options import RefinementOptions
 from .prediction_error import refine
@@ -206,4 +207,132 @@ def refine_nbbi_result(
         "steps": int(res.steps),
         "noise_std": float(sigma),
         "u_initial": float(est[-1]),
+    }
+
+
+def refine_fgi_result(
+    y_nbbi,
+    y_fgi,
+    closed_form: dict,
+    *,
+    levels,
+    cycle_values,
+    nbbi_start: int,
+    hold_samples: int,
+    settle_samples: int,
+    blocks: list[dict],
+    dt: float,
+    options: RefinementOptions | None = None,
+) -> dict:
+    """Joint output-error fit of FGI's $G(jk\\omega)$ (every harmonic of
+    `closed_form["frequency_response"]`) and the border points $U_i$ to the NBBI
+    and FGI records, started from the closed form (`cycle_values`, the $U_i$ that
+    FGI used, and its $G$) or from the settled closed form
+    (`FGIFrequencyParametrisation.initial_theta`), whichever fits better; see `FGIFrequencyParametrisation` ($G(0) = 1$
+    eliminated). Standard errors come from the Fisher information at the refined
+    estimate with $\\hat\\sigma$ from the replicates (`replicate_noise_variance`).
+
+    **Arguments:**
+
+    - `y_nbbi`, `y_fgi`: the two measured records.
+    - `closed_form`: FGI's `result.json` dict.
+    - `levels`: $V_1..V_n$; `cycle_values`: the $2n-2$ starting $U_i$.
+    - `nbbi_start`, `hold_samples`: the NBBI design (initialisation length, hold).
+    - `settle_samples`: samples of each NBBI hold left out (its transient).
+    - `blocks`: the FGI design's blocks (`period_samples`, `periods`,
+      `average_start`, `omega`).
+    - `dt`: the FGI sampling period (s).
+
+    `refined` holds `"frequency_response"` (the contract's entries) and
+    `"cycle"`, `"ascending"`, `"descending"` (the refined $U_i$, as NBBI writes
+    them); `standard_errors` the same with the errors in place of the values.
+    """
+    levels_np = np.asarray(levels, dtype=float)
+    n = levels_np.shape[0]
+    entries = closed_form.get("frequency_response", [])
+    fgi_blocks, starts = [], []
+    for b in blocks:
+        w = float(b["omega"])
+        mine = [
+            e
+            for e in entries
+            if abs(float(e["base_omega"]) - w) <= 1e-9 * max(1.0, abs(w))
+        ]
+        if not mine:
+            continue
+        mine.sort(key=lambda e: int(e["k"]))
+        fgi_blocks.append(
+            FGIBlock(
+                period_samples=int(b["period_samples"]),
+                periods=int(b["periods"]),
+                start=int(b["average_start"]),
+                harmonics=tuple(int(e["k"]) for e in mine),
+            )
+        )
+        starts.append(np.array([complex(float(e["re"]), float(e["im"])) for e in mine]))
+    if len(fgi_blocks) == 0:
+        raise ValueError("the closed form holds no frequency-response entry to refine")
+    if sum(len(b.harmonics) for b in fgi_blocks) != len(entries):
+        raise ValueError(
+            "some frequency-response entries match no block of the design (omega)"
+        )
+    p = FGIFrequencyParametrisation(
+        n_levels=n,
+        nbbi_start=nbbi_start,
+        hold_samples=hold_samples,
+        settle_samples=settle_samples,
+        blocks=fgi_blocks,
+        dt=dt,
+    )
+    y_nbbi = np.asarray(y_nbbi, dtype=float)
+    y_fgi = np.asarray(y_fgi, dtype=float)
+    y = p.select(y_nbbi, y_fgi)
+    # The closed form's U_i may carry the plain average's transient bias, which
+    # makes a poor start; the settled start (`initial_theta`) is used where its
+    # residual is smaller.
+    given = p.pack(np.asarray(cycle_values, dtype=float), starts)
+    settled = p.initial_theta(y_nbbi, y_fgi)
+    rss = [float(jnp.sum((y - p.predict(t, y)) ** 2)) for t in (given, settled)]
+    theta0 = settled if not rss[0] <= rss[1] else given
+    res = refine(p, theta0, y, y, options=options, throw=False)
+    sigma = jnp.sqrt(p.replicate_noise_variance(y_nbbi, y_fgi))
+    se = np.sqrt(np.diag(np.asarray(cramer_rao_bound(p, res.theta, y, sigma))))
+    est = np.asarray(res.theta)
+    cycle_levels = np.concatenate([levels_np, levels_np[-2:0:-1]])  # Eq. (4a-b)
+    m = p.n_cycle
+
+    def pack(x):
+        u = x[:m]
+        fr = [
+            {
+                "omega": k * w,
+                "k": k,
+                "base_omega": w,
+                "re": float(x[m + 2 * j]),
+                "im": float(x[m + 2 * j + 1]),
+            }
+            for j, (_, w, k) in enumerate(p.harmonic_list)
+        ]
+        desc = np.concatenate([u[n - 1 :], u[:1]])
+        return {
+            "frequency_response": fr,
+            "cycle": [
+                [float(V), float(U)] for V, U in zip(cycle_levels, u, strict=True)
+            ],
+            "ascending": [
+                [float(V), float(U)] for V, U in zip(levels_np, u[:n], strict=True)
+            ],
+            "descending": [
+                [float(V), float(U)] for V, U in zip(levels_np[::-1], desc, strict=True)
+            ],
+        }
+
+    return {
+        "refined": pack(est),
+        "standard_errors": pack(se),
+        "converged": bool(res.result == RESULTS.successful),
+        "result": _result_name(res.result),
+        "steps": int(res.steps),
+        "noise_std": float(sigma),
+        "fitted_samples": int(p.n_record_samples),
     }

@@ -175,6 +175,27 @@ def add_identify_arguments(p: argparse.ArgumentParser) -> None:
         "rectangle rule, aliasing error only; default) or hold (y held over each "
         "sample, relative error about k*omega*dt/2)",
     )
+    p.add_argument(
+        "--refine",
+        action="store_true",
+        help="add a joint output-error fit of G(jk omega) at the kept harmonics and "
+        "the border points U_i to the NBBI and FGI records (optimistix), with "
+        "standard errors, under 'refined'",
+    )
+    p.add_argument(
+        "--nbbi",
+        type=Path,
+        default=None,
+        help="the nbbi folder whose data.csv enters the refinement (--refine; "
+        "default: the one recorded in experiment.json)",
+    )
+    p.add_argument(
+        "--settle",
+        type=float,
+        default=None,
+        help="seconds of each NBBI hold left out of the refinement as transient "
+        "(--refine; default: half the hold)",
+    )
 
 
 def identify(args: argparse.Namespace) -> int:
@@ -225,4 +246,59 @@ def identify(args: argparse.Namespace) -> int:
     }
     write_json(folder / "result.json", result)
     print(f"wrote {folder / 'result.json'}: {len(entries)} frequency-response points")
+    if args.refine:
+        result.update(_refine(args, design, y, result))
+        write_json(folder / "result.json", result)
+        state = "converged" if result["converged"] else "did NOT converge"
+        print(f"refinement {state}; added 'refined' and 'standard_errors'")
     return 0
+
+
+def _refine(args: argparse.Namespace, design: dict, y: np.ndarray, result: dict):
+    """The `--refine` part of `identify`: both records in one likelihood."""
+    from ...refinement import refine_fgi_result
+    from .nbbi import nbbi_input
+
+    nbbi_dir = args.nbbi if args.nbbi is not None else design.get("nbbi")
+    if nbbi_dir is None:
+        raise UserInputError(
+            "--refine needs the NBBI record: pass --nbbi DIR (a finished nbbi folder "
+            "with data.csv)"
+        )
+    nbbi_dir = Path(nbbi_dir)
+    nbbi_design = read_design(nbbi_dir, "nbbi")
+    levels = check_levels(nbbi_design["levels"], str(nbbi_dir / "experiment.json"))
+    if not np.allclose(levels, design["levels"], rtol=0, atol=1e-12):
+        raise UserInputError(
+            f"{nbbi_dir / 'experiment.json'}: levels {levels} differ from the FGI "
+            f"design's {design['levels']}"
+        )
+    _, v_nbbi = nbbi_input(nbbi_design)
+    y_nbbi = read_data(nbbi_dir, nbbi_design, v_nbbi)
+    dt_nbbi, hold = float(nbbi_design["dt"]), float(nbbi_design["hold"])
+    hold_samples = int(round(hold / dt_nbbi))
+    settle = hold / 2 if args.settle is None else float(args.settle)
+    if not (math.isfinite(settle) and 0 <= settle < hold):
+        raise UserInputError(f"--settle must be in [0, hold = {hold:g}); got {settle}")
+    settle_samples = int(round(settle / dt_nbbi))
+    refined = refine_fgi_result(
+        y_nbbi,
+        y,
+        result,
+        levels=levels,
+        cycle_values=design["cycle_values"],
+        nbbi_start=int(nbbi_design["init_samples"]),
+        hold_samples=hold_samples,
+        settle_samples=settle_samples,
+        blocks=design["blocks"],
+        dt=float(design["dt"]),
+    )
+    refined["nbbi"] = str(nbbi_dir)
+    refined["settle"] = settle_samples * dt_nbbi
+    refined["refinement_note"] = (
+        "joint output-error fit of the settled NBBI holds (G(0) U_i) and the FGI "
+        "averaged periods (steady state at the kept harmonics), G(0) = 1 eliminated; "
+        "standard errors from the Fisher information with the noise std estimated "
+        "from the replicates (holds, periods)"
+    )
+    return refined

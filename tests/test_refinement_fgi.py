@@ -1,0 +1,395 @@
+"""Seed 000 FGI refinement: G(jk omega) jointly with the U_i, by output error."""
+
+import json
+import os
+import subprocess
+import sys
+
+import jax
+import jax.numpy as jnp
+import jax.random as jr
+import numpy as np
+import pytest
+from scipy import signal
+
+from hamjax._results import RESULTS
+from hamjax.cli.main import main
+from hamjax.io import read_csv, write_csv
+from hamjax.refinement import (
+    FGIBlock,
+    FGIFrequencyParametrisation,
+    cramer_rao_bound,
+    refine,
+)
+
+
+# A small design: n = 4 levels (2n-2 = 6 cycle values), two FGI blocks.
+U_TRUE = np.array([-0.8, -0.3, 0.3, 0.8, 0.35, -0.25])
+
+
+def _small(settle=10, periods=(4, 3), *, average=True):
+    blocks = (
+        FGIBlock(period_samples=24, periods=periods[0], start=30, harmonics=(1, 2)),
+        FGIBlock(period_samples=12, periods=periods[1], start=150, harmonics=(1,)),
+    )
+    p = FGIFrequencyParametrisation(
+        n_levels=4,
+        nbbi_start=5,
+        hold_samples=30,
+        settle_samples=settle,
+        blocks=blocks,
+        dt=0.1,
+        average_replicates=average,
+    )
+    g = [np.array([0.9 - 0.3j, 0.5 - 0.6j]), np.array([0.4 - 0.7j])]
+    return p, p.pack(U_TRUE, g)
+
+
+def test_predict_matches_the_fourier_series_of_the_staircase():
+    # Oracle: y = mean(U) + sum_k Re(G_k c_k e^{jkwt}), with c_k of Eq. (13) by a
+    # fine midpoint rule (independent of segment_weights), error O(h^2) ~ 1e-9.
+    p, theta = _small(average=False)
+    y = np.asarray(p.predict(theta, None))
+    per = 20
+    np.testing.assert_allclose(y[: 6 * per], np.repeat(U_TRUE, per), atol=1e-14)
+    L = 6 * 20000
+    s = (np.arange(L) + 0.5) / L  # t / T
+    u = np.repeat(U_TRUE, L // 6)
+    c = [2 * np.mean(u * np.exp(-2j * np.pi * k * s)) for k in (1, 2)]
+    t = np.arange(24) / 24
+    want = np.mean(U_TRUE) + np.real(
+        (0.9 - 0.3j) * c[0] * np.exp(2j * np.pi * t)
+        + (0.5 - 0.6j) * c[1] * np.exp(4j * np.pi * t)
+    )
+    got = y[6 * per : 6 * per + 24]
+    np.testing.assert_allclose(got, want, atol=1e-8)
+    # the block repeats its period M = 4 times
+    np.testing.assert_allclose(y[6 * per + 24 : 6 * per + 48], want, atol=1e-8)
+    assert y.shape == (p.n_samples,)
+    assert len(p.names) == theta.shape[0] == 6 + 2 * 3
+
+
+def test_noise_free_recovery_from_a_perturbed_start():
+    p, theta = _small()
+    y = p.predict(theta, None)
+    start = theta + 0.05 * jr.normal(jr.key(3), theta.shape)
+    res = refine(p, start, y, y)
+    assert res.result == RESULTS.successful
+    np.testing.assert_allclose(res.theta, theta, atol=1e-8)
+    assert float(res.rss) < 1e-20
+
+
+@pytest.mark.slow
+def test_noise_free_recovery_through_the_simulator():
+    # A real Hammerstein simulation (fast G, straight backlash): NBBI holds settle
+    # to round-off after the left-out half and FGI's steady state holds exactly,
+    # so the refined G(jkw) and U_i are those of the plant.
+    import hamjax.models as hm
+    from hamjax.signals import initialisation_step, nbbi_staircase, periodic_staircase
+    from hamjax.simulation import simulate
+
+    levels = jnp.array([-1.0, -0.4, 0.4, 1.0])
+    dt = 0.01
+    G = hm.ContinuousTransferFunction(jnp.array([1.0]), jnp.array([0.01, 0.2, 1.0]))
+    backlash = hm.Backlash.from_table(
+        jnp.linspace(-2, 2, 81),
+        jnp.linspace(-2, 2, 81) - 0.2,
+        jnp.linspace(-2, 2, 81) + 0.2,
+    )
+    plant = hm.Hammerstein(backlash, G)
+    _, v0 = initialisation_step(levels, duration=2.0, dt=dt)
+    _, v1 = nbbi_staircase(levels, hold=4.0, dt=dt)
+    w_nbbi = simulate(plant, jnp.concatenate([v0, v1]), dt=dt)
+    P = 6 * 105  # omega = 2 pi / 6.3 s
+    _, vf = periodic_staircase(levels, period_samples=P, periods=6, dt=dt)
+    w_fgi = simulate(plant, jnp.concatenate([v0, vf]), dt=dt)
+    block = FGIBlock(
+        period_samples=P, periods=4, start=v0.shape[0] + 2 * P, harmonics=(1, 5, 7)
+    )
+    p = FGIFrequencyParametrisation(
+        n_levels=4,
+        nbbi_start=v0.shape[0],
+        hold_samples=400,
+        settle_samples=200,
+        blocks=(block,),
+        dt=dt,
+    )
+    y = p.select(w_nbbi, w_fgi)
+    u = np.asarray(hm.apply_nonlinearity(backlash, jnp.concatenate([v0, v1])))
+    U = u[v0.shape[0] + 400 * np.arange(6) + 399]
+    g = G.frequency_response(jnp.array([1.0, 5.0, 7.0]) * p.omegas[0])
+    truth = p.pack(U, [g])
+    res = refine(p, p.pack(U + 0.01, [g * 1.02]), y, y)
+    assert res.result == RESULTS.successful
+    np.testing.assert_allclose(res.theta[:6], truth[:6], atol=1e-10)
+    # The sampled steady state aliases harmonics P -+ k onto k: a relative error of
+    # about |G(j(P-k)w) c_(P-k)| / |G(jkw) c_k| (|G| ~ 3e-4 at (P-k)w), up to ~1e-6
+    # at k = 7 here; the model-generated case above checks 1e-8.
+    np.testing.assert_allclose(res.theta, truth, rtol=5e-6, atol=1e-9)
+
+
+def test_averaged_replicates_give_the_same_estimate_and_bound():
+    # sum_j (y_j - mu)^2 = sum_j (y_j - ybar)^2 + n (ybar - mu)^2: same minimiser,
+    # same J^T J.
+    full, theta = _small(average=False)
+    avg, _ = _small()
+    rng = np.random.default_rng(1)
+    y_nbbi = 0.1 * rng.standard_normal(200)
+    y_fgi = 0.1 * rng.standard_normal(200)
+    y_nbbi[5:185] += np.repeat(U_TRUE, 30)
+    w = np.asarray(full.predict(theta, None))
+    y_fgi[30:126] += w[120:216]
+    y_fgi[150:186] += w[216:]
+    results = []
+    for p in (full, avg):
+        y = p.select(y_nbbi, y_fgi)
+        r = refine(p, theta, y, y)
+        results.append((r.theta, cramer_rao_bound(p, theta, y, 0.1)))
+    # equal to the solver tolerance (rtol = atol = 1e-10 on the steps)
+    np.testing.assert_allclose(results[0][0], results[1][0], atol=1e-8)
+    np.testing.assert_allclose(results[0][1], results[1][1], rtol=1e-9, atol=1e-14)
+    assert avg.n_samples == 6 + 24 + 12
+    s2 = float(avg.replicate_noise_variance(y_nbbi, y_fgi))
+    assert abs(s2 - 0.01) < 0.003  # ~300 degrees of freedom
+
+
+@pytest.mark.slow
+def test_gradients_match_finite_differences():
+    p, theta = _small()
+    J = np.asarray(jax.jacfwd(p.predict)(theta, None))
+    h = 1e-6
+    fd = np.stack(
+        [
+            (
+                np.asarray(p.predict(theta + h * e, None))
+                - np.asarray(p.predict(theta - h * e, None))
+            )
+            / (2 * h)
+            for e in np.eye(theta.shape[0])
+        ],
+        axis=1,
+    )
+    np.testing.assert_allclose(J, fd, atol=1e-8)
+    # and the cost gradient of the output-error criterion
+    y = p.predict(theta, None) + 0.1 * jr.normal(jr.key(0), (p.n_samples,))
+    cost = lambda th: 0.5 * jnp.sum((y - p.predict(th, None)) ** 2)
+    grad = np.asarray(jax.grad(cost)(theta))
+    fd = np.array(
+        [
+            (float(cost(theta + h * e)) - float(cost(theta - h * e))) / (2 * h)
+            for e in np.eye(theta.shape[0])
+        ]
+    )
+    np.testing.assert_allclose(grad, fd, rtol=1e-6, atol=1e-7)
+
+
+def test_failures_are_values_under_vmap():
+    p, theta = _small()
+    y = p.predict(theta, None)
+    ys = jnp.stack([y, y.at[3].set(jnp.nan)])
+    f = jax.vmap(lambda yy: refine(p, theta, yy, yy, throw=False).result._value)
+    codes = np.asarray(f(ys))
+    assert codes[0] == RESULTS.successful._value
+    assert codes[1] != RESULTS.successful._value
+    with pytest.raises(Exception, match="NaN|not converge"):
+        refine(p, theta, ys[1], ys[1], throw=True).theta.block_until_ready()
+
+
+def test_structure_errors_are_clear():
+    with pytest.raises(ValueError, match="multiple of"):
+        FGIFrequencyParametrisation(
+            n_levels=4,
+            nbbi_start=0,
+            hold_samples=10,
+            settle_samples=0,
+            blocks=(FGIBlock(period_samples=20, periods=2, start=0, harmonics=(1,)),),
+            dt=0.1,
+        )
+    with pytest.raises(ValueError, match="harmonics"):
+        FGIBlock(period_samples=12, periods=2, start=0, harmonics=(6,))
+    p, _ = _small()
+    with pytest.raises(ValueError, match="FGI record"):
+        p.select(np.zeros(500), np.zeros(100))
+
+
+@pytest.mark.slow
+@pytest.mark.statistical
+def test_monte_carlo_covariance_matches_the_crlb():
+    # Gaussian noise on the model's own output: the output-error estimate is the ML
+    # one; with sigma small against |c_k| the bilinear model is linear to O(sigma),
+    # so its covariance is the CRLB up to O(sigma^2) terms (~1e-4 relative here).
+    # For R independent Gaussian estimates the sample variance over the bound is
+    # chi2_{R-1}/(R-1), of std sqrt(2/(R-1)) = 0.032 at R = 2000; |z| < 4.5 per
+    # parameter (12 of them) gives a false-failure rate below 1e-4 (Bonferroni).
+    # The mean error is tested the same way against its MCSE sqrt(var/R).
+    p, theta = _small()
+    sigma, R = 0.01, 2000
+    w = p.predict(theta, None)
+    keys = jax.vmap(lambda r: jr.fold_in(jr.key(20240622), r))(jnp.arange(R))
+
+    def one(k):
+        y = w + sigma * jr.normal(k, w.shape)
+        return refine(p, theta, y, y, throw=False)
+
+    res = jax.jit(jax.vmap(one))(keys)
+    assert np.all(np.asarray(res.result._value) == RESULTS.successful._value)
+    err = np.asarray(res.theta) - np.asarray(theta)[None, :]
+    bound = np.diag(np.asarray(cramer_rao_bound(p, theta, w, sigma)))
+    ratio = np.var(err, axis=0, ddof=1) / bound
+    z = (ratio - 1) / np.sqrt(2 / (R - 1))
+    assert np.all(np.abs(z) < 4.5), (ratio, z)
+    zmean = np.mean(err, axis=0) / np.sqrt(bound / R)
+    assert np.all(np.abs(zmean) < 4.5), zmean
+
+
+# ----------------------------------------------------------------------------- CLI
+
+
+def _play(v, c):  # reference play operator, borders v -/+ c, from rest
+    u, prev, out = 0.0, v[0], []
+    for vk in v:
+        u = max(u, vk - c) if vk > prev else min(u, vk + c) if vk < prev else u
+        out.append(u)
+        prev = vk
+    return np.array(out)
+
+
+def _sim(v, dt, den):
+    sysd = signal.cont2discrete(signal.tf2ss([1.0], den), dt, "zoh")
+    return signal.dlsim(signal.dlti(*sysd[:4], dt=dt), _play(v, 0.2))[1][:, 0]
+
+
+@pytest.mark.slow
+def test_cli_fgi_refine_end_to_end(tmp_path):
+    dt, den, sigma = 0.01, [0.25, 1.0, 1.0], 0.02
+    rng = np.random.default_rng(7)
+    n, f = tmp_path / "nbbi", tmp_path / "fgi"
+    assert (
+        main(
+            [
+                "experiment",
+                "nbbi",
+                "--levels=-1,-0.5,0,0.5,1",
+                "--hold",
+                "10",
+                "--dt",
+                str(dt),
+                "--out",
+                str(n),
+            ]
+        )
+        == 0
+    )
+    x = read_csv(n / "input.csv", ("t", "v"))
+    y = _sim(x["v"], dt, den) + sigma * rng.standard_normal(x["v"].shape[0])
+    write_csv(n / "data.csv", {"t": x["t"], "v": x["v"], "y": y})
+    assert main(["identify", "nbbi", str(n)]) == 0
+    assert (
+        main(
+            [
+                "experiment",
+                "fgi",
+                "--nbbi",
+                str(n),
+                "--omega",
+                "1.0",
+                "--omega",
+                "2.5",
+                "--periods",
+                "6",
+                "--dt",
+                str(dt),
+                "--out",
+                str(f),
+            ]
+        )
+        == 0
+    )
+    x = read_csv(f / "input.csv", ("t", "v"))
+    y = _sim(x["v"], dt, den) + sigma * rng.standard_normal(x["v"].shape[0])
+    write_csv(f / "data.csv", {"t": x["t"], "v": x["v"], "y": y})
+    assert main(["identify", "fgi", str(f), "--refine", "--nbbi", str(n)]) == 0
+    r = json.loads((f / "result.json").read_text())
+    assert r["converged"] is True
+    # the closed form stays at the top level, refined has the contract's entries
+    fr, ref, se = (
+        r["frequency_response"],
+        r["refined"]["frequency_response"],
+        r["standard_errors"]["frequency_response"],
+    )
+    assert len(ref) == len(fr) == len(se) >= 2
+    for e, g in zip(fr, ref, strict=True):
+        assert set(g) == {"omega", "k", "base_omega", "re", "im"}
+        assert (g["k"], g["base_omega"]) == (e["k"], e["base_omega"])
+    assert len(r["refined"]["cycle"]) == len(r["standard_errors"]["cycle"]) == 8
+    assert abs(r["noise_std"] - sigma) < 0.05 * sigma
+    # consistent: refined G within 5 standard errors of the truth (P(fail) < 1e-5
+    # per entry if the Fisher-information errors are right)
+    for g, s in zip(ref, se, strict=True):
+        truth = 1 / np.polyval(den, 1j * g["omega"])
+        assert abs(g["re"] - truth.real) < 5 * s["re"], (g, s, truth)
+        assert abs(g["im"] - truth.imag) < 5 * s["im"], (g, s, truth)
+    want = np.array([-0.8, -0.7, -0.2, 0.3, 0.8, 0.7, 0.2, -0.3])
+    got = np.array(r["refined"]["cycle"])[:, 1]
+    assert np.all(
+        np.abs(got - want) < 5 * np.array(r["standard_errors"]["cycle"])[:, 1]
+    )
+
+
+def test_cli_fgi_refine_needs_the_nbbi_record(tmp_path, capsys):
+    dt, den = 0.05, [0.25, 1.0, 1.0]
+    n, f = tmp_path / "nbbi", tmp_path / "fgi"
+    common = ["--dt", str(dt), "--out"]
+    assert (
+        main(["experiment", "nbbi", "--levels=-1,0,1", "--hold", "3", *common, str(n)])
+        == 0
+    )
+    x = read_csv(n / "input.csv", ("t", "v"))
+    write_csv(n / "data.csv", {"t": x["t"], "v": x["v"], "y": _sim(x["v"], dt, den)})
+    assert main(["identify", "nbbi", str(n)]) == 0
+    fgi = ["experiment", "fgi", "--nbbi", str(n), "--omega", "1", "--periods", "2"]
+    assert main([*fgi, *common, str(f)]) == 0
+    x = read_csv(f / "input.csv", ("t", "v"))
+    write_csv(f / "data.csv", {"t": x["t"], "v": x["v"], "y": _sim(x["v"], dt, den)})
+    (n / "data.csv").unlink()
+    assert main(["identify", "fgi", str(f), "--refine"]) != 0
+    assert "data.csv" in capsys.readouterr().err
+    assert main(["identify", "fgi", str(f), "--refine", "--settle", "3"]) != 0
+
+
+@pytest.mark.slow
+def test_contract_check_nbbi_fgi_passes(shared_dir):
+    tool = shared_dir / "tools" / "contract_check.py"
+    if not tool.is_file():
+        pytest.skip("contract_check.py not in ../shared/tools")
+    env = dict(os.environ)
+    root = str(__import__("pathlib").Path(__file__).resolve().parents[1])
+    env["PYTHONPATH"] = root + os.pathsep + env.get("PYTHONPATH", "")
+    env["PATH"] = os.path.dirname(sys.executable) + os.pathsep + env["PATH"]
+    out = subprocess.run(
+        [sys.executable, str(tool), "nbbi-fgi"],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=600,
+    )
+    assert out.returncode == 0, out.stdout + out.stderr
+
+
+@pytest.mark.slow
+def test_study_refinement_fgi_tiny(tmp_path, mplcleanup):
+    out = tmp_path / "study"
+    argv = ["--realisations", "2", "--chunk", "2", "--quiet", "--out", str(out)]
+    tiny = ["--hold", "4", "--dt", "0.05", "--periods", "2,3", "--snrs", "30"]
+    assert main(["study", "refinement-fgi", *argv, *tiny, "--no-timing"]) == 0
+    summary = json.loads((out / "refinement_fgi.json").read_text())
+    config = summary["configs"][0]
+    assert config["refined_failure_rate"] == 0.0
+    assert len(config["refined"]["efficiency"]) == len(summary["parameters"])
+    assert {"closed", "settled", "refined"} == set(config["per_harmonic"])
+    # the plain average (5) at a 4 s hold is biased by the transient; the fit of
+    # the settled holds is not
+    u_closed = np.asarray(config["closed_form"]["rmse"][:6])
+    u_refined = np.asarray(config["refined"]["rmse"][:6])
+    assert np.all(u_refined < u_closed)
+    assert (out / "refinement_fgi_rmse.png").stat().st_size > 0

@@ -43,10 +43,9 @@ from ....refinement import (
 )
 from ....refinement.efficiency import efficiency_summary
 from ....signals import (
-    fgi_period_samples,
+    FGIDesign,
     initialisation_step,
     nbbi_staircase,
-    periodic_staircase,
 )
 from ....simulation import simulate
 from ..._refinement import REFINEMENT_OPTIONS, refinement_options
@@ -118,16 +117,13 @@ def make_design(plant, levels, *, hold, dt, omegas, periods, settle_fraction):
     w_nbbi = simulate(plant, jnp.concatenate([v0, v1]), dt=dt)
     U = cycle_points(plant.nonlinearity, levels)
     parts, specs, start = [v0], [], int(v0.shape[0])
-    n = int(levels.shape[0])
     for omega in omegas:
-        P, _ = fgi_period_samples(omega, dt, n)
-        transient = math.ceil(hold / (P * dt))
-        _, vb = periodic_staircase(
-            levels, period_samples=P, periods=transient + periods, dt=dt
+        design = FGIDesign.settling(
+            levels, omega=omega, dt=dt, periods=periods, settle=hold
         )
-        parts.append(vb)
-        specs.append((P, start + transient * P))
-        start += (transient + periods) * P
+        parts.append(design.input()[1])
+        specs.append((design.period_samples, design.start(start)))
+        start += design.total_periods * design.period_samples
     w_fgi = simulate(plant, jnp.concatenate(parts), dt=dt)
     blocks = []
     for P, avg in specs:

@@ -136,7 +136,7 @@ def make_design(plant, levels, *, hold, dt, omegas, periods, settle_fraction):
         )
     hold_samples = int(round(hold / dt))
     p = FGIFrequencyParametrisation(
-        n_levels=n,
+        n_levels=int(levels.shape[0]),
         nbbi_start=int(v0.shape[0]),
         hold_samples=hold_samples,
         settle_samples=int(settle_fraction * hold_samples),

@@ -13,3 +13,20 @@ class RESULTS(eqx.Enumeration):
         "The estimates are inconsistent with the named nonlinearity structure."
     )
     not_exciting = "The input does not excite the quantities to be identified."
+    degenerate = (
+        "The output record is constant to rounding: it carries no response to "
+        "identify (a dead sensor?)."
+    )
+    constrained = (
+        "The estimate lies on the projection ball of radius rho*: rho* is below the "
+        "parameter norm, so (4.1) cannot reach the parameters (raise --rho)."
+    )
+
+
+def result_name(code) -> str:
+    """The name of a concrete `RESULTS` item (`"successful"`, `"degenerate"`, ...)."""
+    value = int(code._value)
+    for name, item in RESULTS._name_to_item.items():
+        if int(item._value) == value:
+            return name
+    raise ValueError(f"not a RESULTS code: {value}")

@@ -388,3 +388,25 @@ def test_noisy_gradient_error_has_a_floor():
     diff = e_full - 0.85 * e_half
     z = diff.mean() / (diff.std(ddof=1) / np.sqrt(reps))
     assert z > -stats.norm.ppf(1 - 1e-3)
+
+
+def test_untrustworthy_records_are_reported_not_successful():
+    # The procedure itself says when its estimate cannot be trusted: a constant
+    # output (degenerate) and a gradient held on a ball below ||Theta*||
+    # (constrained); the batch estimator has no ball.
+    from hamjax._results import RESULTS
+
+    case = paper_case()
+    _, v = hj.pe_impulse_sequence(case.levels, order=2, periods=100)
+    w = hj.simulate(case.plant(), v)
+    kw = dict(levels=case.levels, order=2, throw=False)
+    assert hj.identify_recursive_pl(v, w, **kw).result == RESULTS.successful
+    dead = hj.identify_recursive_pl(v, jnp.full_like(w, -1.25), **kw)
+    assert dead.result == RESULTS.degenerate
+    small = float(jnp.linalg.norm(case.theta_star())) / 10
+    held = hj.identify_recursive_pl(v, w, rho=small, **kw)
+    assert held.result == RESULTS.constrained
+    batch = hj.identify_recursive_pl(v, w, rho=small, estimator="batch", **kw)
+    assert batch.result == RESULTS.successful
+    with pytest.raises(Exception, match="projection ball"):
+        hj.identify_recursive_pl(v, w, levels=case.levels, order=2, rho=small)

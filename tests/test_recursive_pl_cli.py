@@ -169,3 +169,30 @@ def test_reproduce_small(tmp_path, mplcleanup):
     assert r["samples_to_tolerance"]["theta_0.001"] is not None
     for name in ("fig3a.png", "fig3b.png", "convergence.png"):
         assert (out / name).stat().st_size > 0
+
+
+def test_a_dead_sensor_is_degenerate_not_successful(tmp_path, capsys):
+    # y constant (a stuck sensor): the record holds no response, whatever the fit.
+    out = _experiment(tmp_path)
+    x = _write_data(out, dict(k1=1.0, k2=2.0, d1=1.0, d2=-2.0, l1=1.0, l2=-2.0))
+    rows = np.c_[x["t"], x["v"], np.full(x["t"].shape, 0.37)]
+    np.savetxt(out / "data.csv", rows, delimiter=",", header="t,v,y", comments="")
+    assert main(["identify", "recursive-pl", str(out)]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "result degenerate" in err[0] and "dead sensor" in err[0]
+    r = json.loads((out / "result.json").read_text())  # written, not lost
+    assert r["result"] == "degenerate" and "constant" in r["result_message"]
+
+
+def test_a_projection_radius_below_the_parameter_norm_is_constrained(tmp_path, capsys):
+    # ||Theta*|| = 6.5 for this plant: a ball of radius 0.1 holds the estimate on
+    # its surface, far from Theta*; with the default radius the same record is fine.
+    out = _experiment(tmp_path, periods=200)
+    _write_data(out, dict(k1=1.0, k2=2.0, d1=1.0, d2=-2.0, l1=1.0, l2=-2.0))
+    assert main(["identify", "recursive-pl", str(out), "--rho", "0.1"]) == 1
+    r = json.loads((out / "result.json").read_text())
+    assert r["result"] == "constrained"
+    assert np.linalg.norm(r["theta"]) == pytest.approx(0.1, rel=1e-9)
+    assert "raise --rho" in capsys.readouterr().err
+    assert main(["identify", "recursive-pl", str(out)]) == 0
+    assert json.loads((out / "result.json").read_text())["result"] == "successful"

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from .._results import RESULTS
+from .._results import RESULTS, result_name
 
 
 def recursive_pl_result_dict(res, *, rho: float, estimator: str) -> dict:
@@ -31,7 +31,8 @@ def recursive_pl_result_dict(res, *, rho: float, estimator: str) -> dict:
         "l2": num(e.l2),
         "structure": res.structure,
         "consistent": bool(e.consistent),
-        "result": RESULTS[res.result] or "successful",
+        "result": result_name(res.result),
+        "result_message": RESULTS[res.result],
         "theta": np.asarray(res.theta).tolist(),
         "singular_values": np.asarray(e.singular_values).tolist(),
         "excitation": float(res.stats["excitation"]),

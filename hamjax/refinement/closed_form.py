@@ -10,7 +10,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._results import RESULTS
+from .._results import RESULTS, result_name
 from ..identification.seed001 import dead_zone_rule, preload_rule, symmetric_rule
 from .backlash_path import BacklashPathParametrisation
 from .backlash_start import initial_backlash_theta
@@ -20,20 +20,6 @@ from .impulse_table import ImpulseTableParametrisation
 from .options import RefinementOptions
 from .prediction_error import refine
 from .steiglitz_mcbride import steiglitz_mcbride_table
-
-
-def _result_name(result) -> str:
-    value = int(result._value)
-    for name in (
-        "successful",
-        "nonfinite",
-        "not_converged",
-        "inconsistent_structure",
-        "not_exciting",
-    ):
-        if int(getattr(RESULTS, name)._value) == value:
-            return name
-    return str(value)
 
 
 def _lines(levels, points):
@@ -131,7 +117,7 @@ def refine_recursive_pl_result(
         "refined": refined,
         "standard_errors": errors,
         "converged": converged,
-        "result": _result_name(res.result),
+        "result": result_name(res.result),
         "steps": int(res.steps),
         "noise_std": float(sigma),
     }
@@ -203,7 +189,7 @@ def refine_nbbi_result(
         "refined": pack(est, values=True),
         "standard_errors": pack(se, values=False),
         "converged": bool(res.result == RESULTS.successful),
-        "result": _result_name(res.result),
+        "result": result_name(res.result),
         "steps": int(res.steps),
         "noise_std": float(sigma),
         "u_initial": float(est[-1]),
@@ -331,7 +317,7 @@ def refine_fgi_result(
         "refined": pack(est),
         "standard_errors": pack(se),
         "converged": bool(res.result == RESULTS.successful),
-        "result": _result_name(res.result),
+        "result": result_name(res.result),
         "steps": int(res.steps),
         "noise_std": float(sigma),
         "fitted_samples": int(p.n_record_samples),

@@ -175,6 +175,14 @@ def identify(args: argparse.Namespace) -> int:
             f"{args.structure!r} (see result.json 'consistent')",
             file=sys.stderr,
         )
+    if code in (RESULTS.degenerate, RESULTS.constrained):
+        # Written (nothing is lost), but never called successful: exit 1.
+        print(
+            f"hamjax: error: {folder / 'result.json'}: result {result['result']}: "
+            f"{RESULTS[code]}",
+            file=sys.stderr,
+        )
+        return 1
     return 0
 
 

@@ -163,19 +163,22 @@ def _identify(v, y, theta0, levels, rho, n, structure, estimator, keep_history, 
     excitation = excitation_level(phi)
     residual_rms = jnp.sqrt(jnp.mean((y - phi @ theta) ** 2))
     finite = jnp.all(jnp.isfinite(theta)) & jnp.all(jnp.isfinite(estimate.points))
-    result = RESULTS.where(
-        excitation <= _EXCITATION_FLOOR,
-        RESULTS.not_exciting,
-        RESULTS.where(
-            ~finite,
-            RESULTS.nonfinite,
-            RESULTS.where(
-                estimate.consistent,
-                RESULTS.successful,
-                RESULTS.inconsistent_structure,
-            ),
-        ),
+    # A constant output (to rounding) holds no response: every Theta with B = 0
+    # and A(1) y = y explains it. A gradient estimate on the ball of (4.1a) is
+    # held there by the projection: Theta* lies outside, the fixed point is not it.
+    spread = jnp.max(y) - jnp.min(y)
+    constant = spread <= 64 * jnp.finfo(y.dtype).eps * jnp.max(jnp.abs(y))
+    on_ball = (estimator == "gradient") & (jnp.linalg.norm(theta) >= rho * (1 - 1e-9))
+    cases = (
+        (excitation <= _EXCITATION_FLOOR, RESULTS.not_exciting),
+        (constant, RESULTS.degenerate),
+        (~finite, RESULTS.nonfinite),
+        (on_ball, RESULTS.constrained),
+        (~estimate.consistent, RESULTS.inconsistent_structure),
     )
+    result = RESULTS.successful
+    for failed, code in reversed(cases):  # the first failing check wins
+        result = RESULTS.where(failed, code, result)
     stats = {"excitation": excitation, "residual_rms": residual_rms}
     return theta, history, estimate, result, stats
 

@@ -121,17 +121,21 @@ def run(args: argparse.Namespace) -> int:
         if plant is None:
             plant = fit_nominal(case.dt, case.estimation)
             write_json(out / "nominal_model.json", model_to_dict(plant, case.dt))
+            source = "fitted by hamjax on the estimation record (nominal_model.json)"
+        else:
+            source = f"given ({case.folder / 'model.json'})"
         items.append((plant, case.dt, case.estimation, case.validation))
-        where.append((case.folder, out, out.name if len(outs) > 1 else case.name))
+        name = out.name if len(outs) > 1 else case.name
+        where.append((case.folder, out, name, source))
     printer = _InOrder(quiet)
 
     def write(i, d):  # each case is written as soon as its chunk is done
-        folder, out, name = where[i]
-        write_diagnosis(d, out, name)
+        folder, out, name, source = where[i]
+        write_diagnosis(d, out, name, nominal=source)
         if args.figures:
             from ..plotting.diagnosis import save_diagnosis_figures
 
-            save_diagnosis_figures(d, out)
+            save_diagnosis_figures(d, out, name)
         printer.add(i, _line(name, d, verbose))
 
     if items:

@@ -33,16 +33,41 @@ def _clean(x):
     return x
 
 
+def _merged_bands(bands: list[dict]) -> list[tuple[float, float]]:
+    """Significant frequency bands with adjacent ones joined."""
+    out: list[list[float]] = []
+    for x in bands:
+        lo, hi = float(x["f_low_hz"]), float(x["f_high_hz"])
+        if out and math.isclose(out[-1][1], lo, rel_tol=1e-9):
+            out[-1][1] = hi
+        else:
+            out.append([lo, hi])
+    return [(lo, hi) for lo, hi in out]
+
+
+def _number(x) -> str:
+    """A value for a person: floats to 3 significant digits."""
+    if isinstance(x, bool) or not isinstance(x, float):
+        return str(x)
+    return f"{x:.3g}"
+
+
 def _significant_axes(where: dict) -> list[str]:
     b = where["before"]
     out = []
-    bands = [x for x in b["frequency"] if x["significant"]]
+    bands = _merged_bands([x for x in b["frequency"] if x["significant"]])
     if bands:
         out.append(
             "frequency: above the floor in "
-            + ", ".join(f"{x['f_low_hz']:.3g}-{x['f_high_hz']:.3g} Hz" for x in bands)
+            + ", ".join(f"{lo:.3g}-{hi:.3g} Hz" for lo, hi in bands)
         )
+    # With an identity map (or any map leaving the bins alike) u repeats v.
+    same_bins = [(x["v_low"], x["v_high"]) for x in b["amplitude_v"]] == [
+        (x["u_low"], x["u_high"]) for x in b["amplitude_u"]
+    ]
     for key, label in (("amplitude_v", "v"), ("amplitude_u", "u")):
+        if label == "u" and same_bins:
+            continue
         bins = [x for x in b[key] if x["significant"]]
         if bins:
             out.append(
@@ -80,17 +105,22 @@ def _significant_axes(where: dict) -> list[str]:
     return out
 
 
-def report_markdown(d, name: str = "case") -> str:
-    """A page a person reads in two minutes."""
+def report_markdown(d, name: str = "case", nominal: str | None = None) -> str:
+    """A page a person reads in two minutes. `nominal`: where the nominal model
+    came from (e.g. the user's `model.json`, or fitted by hamjax)."""
     lines = [
         f"# Sim-to-real gap: {name}",
         "",
         f"**Effect named: `{d.effect}`**",
         "",
-        f"- gap before (nominal model): {d.gap_before:.4g}",
+    ]
+    if nominal is not None:
+        lines.append(f"- nominal model: {nominal}")
+    lines += [
+        f"- gap before (nominal model): {d.gap_before:.4g} (units of y)",
         f"- gap after (nominal + named effect, fitted on estimation data): "
-        f"{d.gap_after:.4g}",
-        f"- noise floor: {d.noise_floor:.4g}; shrink "
+        f"{d.gap_after:.4g} (units of y)",
+        f"- noise floor: {d.noise_floor:.4g} (units of y); shrink "
         f"(gap_before - gap_after)/(gap_before - noise) = {d.shrink:.2f}",
         f"- gap measured as: {d.gap_definition}",
         "",
@@ -102,7 +132,7 @@ def report_markdown(d, name: str = "case") -> str:
         "",
         "## Candidates (best first)",
         "",
-        "| effect | gap after | measure |",
+        "| effect | gap after (units of y) | measure |",
         "|---|---|---|",
     ]
     for c in d.ranking:
@@ -122,7 +152,7 @@ def report_markdown(d, name: str = "case") -> str:
             )
     lines += ["", "## Significance", ""]
     for k, x in d.tests.items():
-        lines.append(f"- {k}: " + ", ".join(f"{a}={b}" for a, b in x.items()))
+        lines.append(f"- {k}: " + ", ".join(f"{a}={_number(b)}" for a, b in x.items()))
     lines += [
         "",
         "Rule: held-out validation improvement with batch-means z > 3.5 and above "
@@ -135,9 +165,12 @@ def report_markdown(d, name: str = "case") -> str:
     return "\n".join(lines)
 
 
-def write_diagnosis(d, out: Path, name: str = "case") -> None:
+def write_diagnosis(
+    d, out: Path, name: str = "case", nominal: str | None = None
+) -> None:
     """Write `diagnosis.json` and `report.md` into `out` (the figures are
-    `hamjax.plotting.diagnosis.save_diagnosis_figures`)."""
+    `hamjax.plotting.diagnosis.save_diagnosis_figures`); `nominal` as in
+    `report_markdown`."""
     out.mkdir(parents=True, exist_ok=True)
     write_json(out / "diagnosis.json", _clean(diagnosis_dict(d)))
-    atomic_write_text(out / "report.md", report_markdown(d, name))
+    atomic_write_text(out / "report.md", report_markdown(d, name, nominal))

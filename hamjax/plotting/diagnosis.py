@@ -29,9 +29,9 @@ def plot_residual_amplitude(d, ax: Axes | None = None) -> Figure:
     ax.axhspan(
         -2 * d.noise_floor, 2 * d.noise_floor, color="C2", alpha=0.15, label="±2 noise"
     )
-    ax.set_xlabel("input v")
-    ax.set_ylabel("residual y - y_nominal")
-    ax.set_title("residual vs amplitude and direction")
+    ax.set_xlabel("input v (units of v)")
+    ax.set_ylabel("residual y - y_nominal (units of y)")
+    ax.set_title("validation residual against the input and its direction")
     ax.legend(fontsize=8)
     return fig
 
@@ -50,39 +50,67 @@ def plot_residual_spectrum(d, ax: Axes | None = None) -> Figure:
         ax.loglog(f, P, lw=0.7, label=label)
     ax.axhline(d.noise_floor**2, color="k", ls="--", label="noise floor")
     ax.set_xlabel("frequency (Hz)")
-    ax.set_ylabel("periodogram")
-    ax.set_title("residual spectrum")
+    ax.set_ylabel("periodogram |FFT|²/N (units of y²)")
+    ax.set_title("spectrum of the validation residual")
     ax.legend(fontsize=8)
     return fig
 
 
-def plot_validation(d, ax: Axes | None = None) -> Figure:
-    """Measured validation output against the nominal and the augmented model."""
+def plot_validation(d, ax: Axes | None = None, *, name: str = "case") -> Figure:
+    """Measured validation output against the nominal and the augmented model, the
+    case and its gaps in the title."""
     fig, ax = _axes(ax)
     ax.plot(d.t, d.y, color="0.5", lw=0.8, label="measured")
-    ax.plot(d.t, d.y_nominal, lw=0.8, label="nominal")
-    ax.plot(d.t, d.y_augmented, lw=0.8, ls="--", label=f"nominal + {d.effect}")
+    ax.plot(d.t, d.y_nominal, lw=0.8, label=f"nominal (gap {d.gap_before:.3g})")
+    ax.plot(
+        d.t,
+        d.y_augmented,
+        lw=0.8,
+        ls="--",
+        label=f"nominal + {d.effect} (gap {d.gap_after:.3g})",
+    )
     ax.set_xlabel("t (s)")
-    ax.set_ylabel("y")
-    ax.set_title("validation record")
+    ax.set_ylabel("y (units of y)")
+    ax.set_title(
+        f"{name}: validation record (noise floor {d.noise_floor:.3g})", fontsize=10
+    )
     ax.legend(fontsize=8)
     return fig
 
 
 def plot_ranking(d, ax: Axes | None = None) -> Figure:
-    """Validation gap after each candidate, with the gap before and the noise floor."""
-    fig, ax = _axes(ax)
-    names = [c["effect"] for c in d.ranking]
-    gaps = [c["gap_after"] for c in d.ranking]
-    colours = ["C1" if c["measure"] != "simulation" else "C0" for c in d.ranking]
-    y = np.arange(len(names))[::-1]
-    ax.barh(y, gaps, color=colours)
-    ax.set_yticks(y, names, fontsize=8)
-    ax.axvline(d.gap_before, color="k", label="gap before")
-    ax.axvline(d.noise_floor, color="C2", ls="--", label="noise floor")
-    ax.set_xlabel("validation RMS (orange: one-step prediction)")
-    ax.set_title(f"candidates (named: {d.effect})")
-    ax.legend(fontsize=8)
+    """Validation gap after each candidate against the gap before and the noise
+    floor: simulation errors and one-step prediction errors (the noise models) on
+    separate axes, since the two measure different things."""
+    groups = [
+        (m, [c for c in d.ranking if (c["measure"] == "simulation") == (m == 0)])
+        for m in (0, 1)
+    ]
+    groups = [(m, cs) for m, cs in groups if cs]
+    if ax is None:
+        heights = [max(len(cs), 1) for _, cs in groups]
+        fig, axes = plt.subplots(
+            len(groups),
+            1,
+            figsize=(6.4, 1.2 + 0.32 * sum(heights)),
+            gridspec_kw={"height_ratios": heights},
+            squeeze=False,
+        )
+        axes = list(axes[:, 0])
+    else:
+        fig, axes = ax.figure, [ax] * len(groups)
+    for a, (m, cs) in zip(axes, groups, strict=True):
+        y = np.arange(len(cs))[::-1]
+        a.barh(y, [c["gap_after"] for c in cs], color="C0" if m == 0 else "C1")
+        a.set_yticks(y, [c["effect"] for c in cs], fontsize=8)
+        a.axvline(d.noise_floor, color="C2", ls="--", label="noise floor")
+        if m == 0:
+            a.axvline(d.gap_before, color="k", label="gap before (nominal)")
+            a.set_xlabel("validation RMS simulation error (units of y)")
+        else:
+            a.set_xlabel("validation RMS one-step prediction error (units of y)")
+        a.legend(fontsize=7)
+    axes[0].set_title(f"candidates (named: {d.effect})")
     return fig
 
 
@@ -105,18 +133,18 @@ def plot_confusion(score: dict, ax: Axes | None = None) -> Figure:
     return fig
 
 
-def save_diagnosis_figures(d, out: Path) -> list[Path]:
-    """Write the four figures of a diagnosis into `out`."""
+def save_diagnosis_figures(d, out: Path, name: str = "case") -> list[Path]:
+    """Write the four figures of a diagnosis of case `name` into `out`."""
     paths = []
-    for name, fn in (
+    for file, fn in (
         ("residual_amplitude.png", plot_residual_amplitude),
         ("residual_spectrum.png", plot_residual_spectrum),
-        ("validation.png", plot_validation),
+        ("validation.png", lambda d: plot_validation(d, name=name)),
         ("ranking.png", plot_ranking),
     ):
         fig = fn(d)
         fig.tight_layout()
-        fig.savefig(Path(out) / name, dpi=110)
+        fig.savefig(Path(out) / file, dpi=110)
         plt.close(fig)
-        paths.append(Path(out) / name)
+        paths.append(Path(out) / file)
     return paths

@@ -67,8 +67,9 @@ def run_demo(key, out) -> list[tuple[str, str]]:
 
     folder = Path(out) / "diagnosis"
     d = diagnose_gap(*tiny_case(key, "saturation", n=600, noise=0.01))
-    write_diagnosis(d, folder, "built-in withheld saturation")
-    save_diagnosis_figures(d, folder)
+    name = "built-in withheld saturation"
+    write_diagnosis(d, folder, name, nominal="the built-in nominal (model given)")
+    save_diagnosis_figures(d, folder, name)
     return [
         (str(folder / "report.md"), f"diagnosis report: named {d.effect}"),
         (str(folder / "validation.png"), "nominal vs augmented vs measured"),

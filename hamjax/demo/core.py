@@ -29,7 +29,7 @@ def run(key, out: Path) -> list[tuple[str, str]]:
         v,
         y,
         w=w,
-        title="seed 000 Fig. 6 analogue: (s-10)/(s+1)^2, n=4, input (3)+(4a-b)",
+        title="Backlash plant (s-10)/(s+1)^2: staircase experiment of NBBI, 4 levels",
     )
     fig.savefig(out / "seed000_staircase_io.png", dpi=110)
     made.append(
@@ -90,7 +90,7 @@ def run(key, out: Path) -> list[tuple[str, str]]:
         v2,
         y2,
         w=w2,
-        title="seed 001, Section V.C plant: PE impulse input (5.1), n=2, 6 periods",
+        title="Piecewise-linear plant: persistently exciting impulse input, 6 periods",
     )
     fig.savefig(out / "seed001_pe_io.png", dpi=110)
     made.append(

@@ -64,9 +64,9 @@ def plot_cycle(
         ms=8,
         label=r"$\hat W_i$ on $\mathcal{P}_d$",
     )
-    ax.set_xlabel("v")
-    ax.set_ylabel("u (output units, G(0) = 1)")
-    ax.set_title(title or f"NBBI: {2 * n - 2} points of the backlash cycle (Fig. 5)")
+    ax.set_xlabel("input v (units of v)")
+    ax.set_ylabel("u (units of y, G(0) = 1)")
+    ax.set_title(title or f"NBBI: {2 * n - 2} points of the backlash cycle")
     ax.legend(fontsize=7, loc="best")
     ax.grid(alpha=0.3)
     fig.tight_layout()
@@ -83,14 +83,14 @@ def plot_nbbi_experiment(
         fig = axes[0].figure
     ax_v, ax_y = axes
     ax_v.step(np.asarray(t), np.asarray(v), where="post", color="C0", lw=1)
-    ax_v.set_ylabel("input v")
-    ax_v.set_title("NBBI experiment: initialisation (3) + staircase (4a-b) (Fig. 6)")
+    ax_v.set_ylabel("input v (units of v)")
+    ax_v.set_title("NBBI experiment: initialisation step, then the staircase")
     ax_y.plot(np.asarray(t), np.asarray(y), color="C1", lw=0.4, label="noisy y")
     if w is not None:
         ax_y.plot(np.asarray(t), np.asarray(w), color="k", lw=1, label="noise-free w")
         ax_y.legend(fontsize=8, loc="best")
-    ax_y.set_ylabel("output y")
-    ax_y.set_xlabel("t [s]")
+    ax_y.set_ylabel("output y (units of y)")
+    ax_y.set_xlabel("t (s)")
     fig.tight_layout()
     return fig
 
@@ -129,10 +129,10 @@ def plot_bode(
         g = np.asarray(linear.frequency_response(grid))
         ax_m.loglog(grid, np.abs(g), "k", lw=1, label="true G")
         ax_p.semilogx(grid, _phase(g), "k", lw=1)
-    ax_m.set_ylabel("|G(jw)|")
-    ax_p.set_ylabel("phase [deg]")
-    ax_p.set_xlabel("w [rad/s]")
-    ax_m.set_title("FGI: frequency response (Table 2, Remark 2a)")
+    ax_m.set_ylabel("|G(jw)| (y per u)")
+    ax_p.set_ylabel("phase (deg)")
+    ax_p.set_xlabel("w (rad/s)")
+    ax_m.set_title("FGI: frequency response of the linear block")
     ax_m.legend(fontsize=7, loc="best")
     for ax in axes:
         ax.grid(alpha=0.3, which="both")

@@ -30,9 +30,11 @@ def plot_fig3a(t, history, theta_star, *, ax=None) -> Figure:
         ax.axhline(theta_star[k], color=line.get_color(), ls="--", lw=0.7)
     ax.set_xscale("log")
     ax.set_xlabel("t + 1 (samples)")
-    ax.set_ylabel("parameter estimates")
-    ax.set_title("Fig. 3a analogue: gradient (4.1) estimates of Theta* (dashed)")
-    ax.legend(ncol=5, fontsize=7, loc="lower right")
+    ax.set_ylabel("parameter estimate")
+    ax.set_title("Recursive estimates of the parameter vector (true values dashed)")
+    # Outside the axes: inside, any corner hides a curve or its target.
+    ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5))
+    fig.set_size_inches(8.2, 4)
     fig.tight_layout()
     return fig
 
@@ -56,8 +58,8 @@ def plot_fig3b(t, estimates, case, *, ax=None) -> Figure:
     ax.set_xscale("log")
     ax.set_ylim(-6, 6)
     ax.set_xlabel("t + 1 (samples)")
-    ax.set_ylabel("nonlinearity parameters")
-    ax.set_title("Fig. 3b analogue: K, H of (4.9)-(4.10), scale b1 = 1 (truth dashed)")
+    ax.set_ylabel("slope K, offset H (units of u per v, of u)")
+    ax.set_title("Recursive estimates of the map's slopes and offsets (truth dashed)")
     ax.legend(fontsize=8)
     fig.tight_layout()
     return fig
@@ -83,7 +85,8 @@ def plot_convergence(t, history, estimates, case, *, ax=None) -> Figure:
     for tol in (1e-3, 1e-6):
         ax.axhline(tol, color="grey", ls=":", lw=0.8)
     ax.set_xlabel("t (samples)")
-    ax.set_ylabel("error")
+    ax.set_ylabel("max absolute error")
+    ax.set_title("Convergence of the recursive estimates")
     ax.legend()
     fig.tight_layout()
     return fig

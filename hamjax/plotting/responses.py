@@ -16,13 +16,27 @@ def plot_input_output(
         fig = axes[0].figure
     ax_v, ax_y = axes
     ax_v.step(np.asarray(t), np.asarray(v), where="post", color="C0", lw=1)
-    ax_v.set_ylabel("input v")
-    ax_y.plot(np.asarray(t), np.asarray(y), color="C1", lw=0.6, label="measured y")
+    ax_v.set_ylabel("input v (units of v)")
+    # The measured samples on top of the noise-free output, as points when few
+    # enough to see, so neither hides the other.
+    few = np.size(t) <= 600
     if w is not None:
         ax_y.plot(np.asarray(t), np.asarray(w), color="k", lw=1, label="noise-free w")
+    ax_y.plot(
+        np.asarray(t),
+        np.asarray(y),
+        color="C1",
+        lw=0 if few else 0.6,
+        marker="." if few else None,
+        ms=4,
+        alpha=0.9,
+        label="measured y",
+        zorder=3,
+    )
+    if w is not None:
         ax_y.legend(loc="best", fontsize=8)
-    ax_y.set_ylabel("output y")
-    ax_y.set_xlabel("t [s]")
+    ax_y.set_ylabel("output y (units of y)")
+    ax_y.set_xlabel("t (s)")
     if title:
         ax_v.set_title(title)
     fig.tight_layout()
@@ -47,8 +61,8 @@ def plot_characteristic(
             g, np.asarray(borders[1](g)), color="C3", lw=1, label="descending $f_d$"
         )
     ax.plot(np.asarray(v), np.asarray(u), color="k", lw=1.2, label="working point")
-    ax.set_xlabel("v")
-    ax.set_ylabel("u = F[v]")
+    ax.set_xlabel("input v (units of v)")
+    ax.set_ylabel("u = F[v] (units of u)")
     ax.legend(loc="best", fontsize=8)
     if title:
         ax.set_title(title)

@@ -68,7 +68,7 @@ def run_example(key, out: Path, *, noise, hold, omegas, periods):
         settled,
         borders=_borders(plant.nonlinearity),
         true_values=truth,
-        title="NBBI points, settled average (Fig. 5; k = G(0) = -10)",
+        title="Backlash cycle points from NBBI, settled average (gain k = G(0) = -10)",
     )
     fig.savefig(out / "fig5_cycle_points.png", dpi=110)
     made.append(("fig5_cycle_points.png", "limit cycle with NBBI points (Fig. 5)"))

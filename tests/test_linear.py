@@ -235,3 +235,25 @@ def test_continuous_frequency_response_is_differentiable():
         -(w**2) * T / (1 + w**2 * T**2) ** 1.5,
         rtol=1e-12,
     )
+
+
+def test_traced_and_host_stability_checks_agree():
+    # `stable()` (traced, under jit) and `is_stable()` (NumPy on the host) are one
+    # computation: they agree on stable, unstable and marginal blocks.
+    import jax
+
+    import hamjax as hj
+
+    blocks = [
+        hj.DiscreteTransferFunction([0.0, 1.0, -2.0], [1.0, -1.5, 0.56]),
+        hj.DiscreteTransferFunction([0.0, 1.0], [1.0, -2.1, 1.2]),
+        hj.DiscreteTransferFunction([0.0, 1.0], [1.0, -1.0]),  # an integrator
+        hj.DiscreteTransferFunction([2.0], [1.0]),
+        hj.ContinuousTransferFunction([1.0, -10.0], [1.0, 2.0, 1.0]),
+        hj.ContinuousTransferFunction([1.0], [1.0, -1.0]),
+        hj.ContinuousTransferFunction([1.0], [1.0, 0.0]),
+    ]
+    expected = [True, False, False, True, True, False, False]
+    for block, want in zip(blocks, expected, strict=True):
+        assert block.is_stable() is want
+        assert bool(jax.jit(lambda b: b.stable())(block)) is want

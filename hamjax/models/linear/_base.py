@@ -3,21 +3,25 @@
 import abc
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, Bool, Float
 
 from ..._checks import concrete
 
 
-def companion_roots(tail: Float[Array, " n"]) -> Array:
+def companion_roots(tail: Float[Array, " n"], *, xp=jnp) -> Array:
     r"""Roots of the monic polynomial $x^n + c_1 x^{n-1} + \dots + c_n$ with
-    `tail` $= (c_1, \dots, c_n)$, as the eigenvalues of its companion matrix
-    (traceable: the stability checks run under jit and vmap)."""
+    `tail` $= (c_1, \dots, c_n)$, as the eigenvalues of its companion matrix.
+
+    Traceable with `xp = jax.numpy` (the stability checks run under jit and vmap);
+    `xp = numpy` is the same computation on the host, for concrete coefficients
+    (no small XLA programs compiled per shape).
+    """
     n = tail.shape[0]
-    companion = jnp.zeros((n, n), dtype=tail.dtype).at[0, :].set(-tail)
-    if n > 1:
-        companion = companion.at[1:, :-1].set(jnp.eye(n - 1))
-    return jnp.linalg.eigvals(companion)
+    companion = xp.concatenate([-tail[None, :], xp.eye(n - 1, n)], axis=0)
+    return xp.linalg.eigvals(companion)
 
 
 class AbstractLinearBlock(eqx.Module):
@@ -32,17 +36,18 @@ class AbstractLinearBlock(eqx.Module):
         """The poles (complex), computed from concrete coefficients."""
 
     @abc.abstractmethod
-    def stable(self) -> Bool[Array, ""]:
+    def stable(self, *, xp=jnp) -> Bool[Array, ""]:
         """Whether all poles are strictly inside the stability region and every
-        coefficient is finite; traceable (under jit, a traced boolean)."""
+        coefficient is finite; traceable (under jit, a traced boolean). `xp=numpy`
+        computes it on the host (concrete coefficients only)."""
 
     def is_stable(self) -> bool:
         """`stable()` of a block with concrete coefficients, as a Python bool
-        (`ValueError` for traced ones: use `stable()` there)."""
-        ok = concrete(self.stable())
-        if ok is None:
+        computed on the host (`ValueError` for traced ones: use `stable()`)."""
+        arrays = [x for x in jax.tree.leaves(self) if eqx.is_array(x)]
+        if any(concrete(x) is None for x in arrays):
             raise ValueError("is_stable needs concrete coefficients (not under jit)")
-        return bool(ok)
+        return bool(self.stable(xp=np))
 
     @abc.abstractmethod
     def scaled(self, gain) -> "AbstractLinearBlock":

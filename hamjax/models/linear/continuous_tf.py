@@ -57,12 +57,13 @@ class ContinuousTransferFunction(AbstractContinuousLinearBlock):
             raise ValueError("poles need concrete coefficients (not under jit)")
         return np.roots(den)
 
-    def stable(self) -> Bool[Array, ""]:
-        finite = jnp.all(jnp.isfinite(self.den)) & jnp.all(jnp.isfinite(self.num))
-        if self.den.shape[0] == 1:
+    def stable(self, *, xp=jnp) -> Bool[Array, ""]:
+        num, den = xp.asarray(self.num), xp.asarray(self.den)
+        finite = xp.all(xp.isfinite(den)) & xp.all(xp.isfinite(num))
+        if den.shape[0] == 1:
             return finite
-        roots = companion_roots(self.den[1:] / self.den[0])
-        return jnp.all(roots.real < 0.0) & finite
+        roots = companion_roots(den[1:] / den[0], xp=xp)
+        return xp.all(roots.real < 0.0) & finite
 
     def scaled(self, gain) -> "ContinuousTransferFunction":
         return ContinuousTransferFunction(self.num * gain, self.den)

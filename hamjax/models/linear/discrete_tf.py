@@ -77,12 +77,13 @@ class DiscreteTransferFunction(AbstractDiscreteLinearBlock):
             raise ValueError("poles need concrete coefficients (not under jit)")
         return np.roots(a) if a.shape[0] > 1 else np.zeros(0, complex)
 
-    def stable(self) -> Bool[Array, ""]:
-        finite = jnp.all(jnp.isfinite(self.a)) & jnp.all(jnp.isfinite(self.b))
-        if self.a.shape[0] == 1:
+    def stable(self, *, xp=jnp) -> Bool[Array, ""]:
+        a, b = xp.asarray(self.a), xp.asarray(self.b)
+        finite = xp.all(xp.isfinite(a)) & xp.all(xp.isfinite(b))
+        if a.shape[0] == 1:
             return finite
-        roots = companion_roots(self.a[1:] / self.a[0])
-        return jnp.all(jnp.abs(roots) < 1.0) & finite
+        roots = companion_roots(a[1:] / a[0], xp=xp)
+        return xp.all(xp.abs(roots) < 1.0) & finite
 
     def scaled(self, gain) -> "DiscreteTransferFunction":
         return DiscreteTransferFunction(self.b * gain, self.a, self.dt)

@@ -46,11 +46,12 @@ class DiscreteStateSpace(AbstractDiscreteLinearBlock):
             raise ValueError("poles need concrete matrices (not under jit)")
         return np.linalg.eigvals(A)
 
-    def stable(self) -> Bool[Array, ""]:
-        finite = jnp.all(
-            jnp.array([jnp.all(jnp.isfinite(m)) for m in (self.A, self.B, self.C)])
+    def stable(self, *, xp=jnp) -> Bool[Array, ""]:
+        A, B, C = (xp.asarray(m) for m in (self.A, self.B, self.C))
+        finite = (
+            xp.all(xp.isfinite(A)) & xp.all(xp.isfinite(B)) & xp.all(xp.isfinite(C))
         )
-        return jnp.all(jnp.abs(jnp.linalg.eigvals(self.A)) < 1.0) & finite
+        return xp.all(xp.abs(xp.linalg.eigvals(A)) < 1.0) & finite
 
     def scaled(self, gain) -> "DiscreteStateSpace":
         return DiscreteStateSpace(self.A, self.B, self.C * gain, self.D * gain, self.dt)

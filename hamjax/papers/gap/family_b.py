@@ -712,6 +712,8 @@ def _draw(rng, cause: str) -> dict | None:
         sigma_hi = _rms(w0["estimation"]) / 10 ** (SNR_DB[0] / 20)
         sigma_lo = _rms(w0["estimation"]) / 10 ** (SNR_DB[1] / 20)
         sigma = min(max(E / ratio, sigma_lo), sigma_hi)
+        if not RATIO[0] * 0.8 <= E / sigma <= RATIO[1] * 1.25:
+            return None  # the cause cannot show at this size in this plant: draw again
         w, magnitude = ws, m
         truth["effect_after_refit_rms"] = E
         truth["effect_rms"] = min(_rms(ws[r] - w0[r]) for r in recs)
@@ -776,6 +778,7 @@ def _model_dict(plant: _Plant, ph_nom: dict) -> dict:
     """model.json of the nominal (contract schema): continuous_tf, identity or a
     tabulated valve characteristic covering the inputs."""
     num, den = _tf(plant.kind, ph_nom)
+    num, den = num / den[-1], den / den[-1]  # time-constant form: den[-1] = 1
     lin = {"kind": "continuous_tf", "num": [float(x) for x in num], "den": [float(x) for x in den]}
     if plant.kind == "valve_process":
         grid = np.linspace(-1.3 * plant.vs, 1.3 * plant.vs, 27)

@@ -206,12 +206,30 @@ def _tf(kind: str, ph: dict) -> tuple[np.ndarray, np.ndarray]:
     return np.array([ph["K"]]), den
 
 
-def _valve_char(ph: dict, x, vs: float):
-    """Installed valve characteristic around the operating point (odd, slope 1 at 0)."""
-    b, z = ph["beta"], ph["in_scale"] * np.asarray(x) / vs
+VALVE_GRID = 27  # points of the valve's table, over +-1.3 x the largest command
+
+
+def _valve_grid(vs: float) -> np.ndarray:
+    return np.linspace(-1.3 * vs, 1.3 * vs, VALVE_GRID)
+
+
+def _valve_table(ph: dict, grid, vs: float):
+    """Installed valve characteristic around the operating point (odd, slope 1 at 0),
+    at the points `grid`: the vendor's curve."""
+    b, z = ph["beta"], np.asarray(grid) / vs
     if ph["char"] == "quick_opening":
         return vs * np.tanh(b * z) / b
     return vs * np.sinh(b * z) / b
+
+
+def _valve_char(ph: dict, x, vs: float):
+    """The characteristic as the valve's table (linear between its points, constant
+    beyond its ends), the command scaled by `in_scale` (the valve's sizing): the plant
+    and its nominal share this form (the nominal's table points at grid / in_scale),
+    so a nominal with the true parameters is the plant exactly and an input-scale
+    error is exactly what the contract's re-fit may change."""
+    grid = _valve_grid(vs)
+    return np.interp(ph["in_scale"] * np.asarray(x, float), grid, _valve_table(ph, grid, vs))
 
 
 # -------------------------------------------------------- linear sims -----
@@ -781,11 +799,11 @@ def _model_dict(plant: _Plant, ph_nom: dict) -> dict:
     num, den = num / den[-1], den / den[-1]  # time-constant form: den[-1] = 1
     lin = {"kind": "continuous_tf", "num": [float(x) for x in num], "den": [float(x) for x in den]}
     if plant.kind == "valve_process":
-        grid = np.linspace(-1.3 * plant.vs, 1.3 * plant.vs, 27)
+        grid = _valve_grid(plant.vs)
         nl = {
             "kind": "tabulated",
-            "v": [float(x) for x in grid],
-            "u": [float(x) for x in _valve_char(ph_nom, grid, plant.vs)],
+            "v": [float(x) for x in grid / ph_nom["in_scale"]],
+            "u": [float(x) for x in _valve_table(ph_nom, grid, plant.vs)],
         }
     else:
         nl = {"kind": "identity"}

@@ -739,20 +739,20 @@ def _draw(rng, cause: str) -> dict | None:
             return None
     # the nominal model: the same physics with parameters off
     errors = _draw_errors(rng, kind, ph)
+    def nominal_gap(scale):  # the larger of the two records'
+        p_nom = _perturbed(ph, kind, errors, scale)
+        return max(_rms(plant.linear_output(v, p_nom) - w0[r]) for r, v in recs.items())
+
     if cause in ("none", "drift", "coloured_noise"):
-        full = _rms(plant.linear_output(v_est, _perturbed(ph, kind, errors, 1.0)) - w0["estimation"])
         goal = rng.uniform(0.0, 0.1) * sigma
-        scale = min(1.0, goal / max(full, 1e-300))
+        scale = min(1.0, goal / max(nominal_gap(1.0), 1e-300))
         for _ in range(30):  # the error is about linear in the scale: check it
-            gap = _rms(
-                plant.linear_output(v_est, _perturbed(ph, kind, errors, scale)) - w0["estimation"]
-            )
-            if gap <= 0.1 * sigma:
+            if nominal_gap(scale) <= 0.1 * sigma:
                 break
             scale /= 2
         errors = {k: e * scale for k, e in errors.items()}
     ph_nom = _perturbed(ph, kind, errors, 1.0)
-    gap_nominal = _rms(plant.linear_output(v_est, ph_nom) - w0["estimation"])
+    gap_nominal = nominal_gap(1.0)
     if cause == "parameter_mismatch" and gap_nominal < 0.3 * sigma:
         sigma = gap_nominal / rng.uniform(0.3, 2.0)  # keep it visible (SNR may pass 40 dB)
     # noise and noise-model causes

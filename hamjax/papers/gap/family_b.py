@@ -140,7 +140,13 @@ def _draw_physics(rng, kind: str, dt: float) -> dict:
         R, Kt = u(0.5, 3.0), u(0.05, 0.3)
         b = Kt**2 / R * u(0.05, 0.3)
         J = tm * (Kt**2 + R * b) / R
-        return {"R": R, "Kt": Kt, "J": J, "b": b, "Kamp": u(0.5, 2.0) * (Kt**2 + R * b) / Kt}
+        return {
+            "R": R,
+            "Kt": Kt,
+            "J": J,
+            "b": b,
+            "Kamp": u(0.5, 2.0) * (Kt**2 + R * b) / Kt,
+        }
     if kind == "servo_gear":  # motor position servo, gear contact, load inertia
         ts = u(3, 12) * dt
         wc = u(0.25, 0.8) / dt  # contact mode
@@ -184,7 +190,10 @@ def _tf(kind: str, ph: dict) -> tuple[np.ndarray, np.ndarray]:
     if kind == "thermal2":
         C1, C2, R12, R2 = ph["C1"], ph["C2"], ph["R12"], ph["R2"]
         A = np.array(
-            [[-1 / (R12 * C1), 1 / (R12 * C1)], [1 / (R12 * C2), -1 / (R12 * C2) - 1 / (R2 * C2)]]
+            [
+                [-1 / (R12 * C1), 1 / (R12 * C1)],
+                [1 / (R12 * C2), -1 / (R12 * C2) - 1 / (R2 * C2)],
+            ]
         )
         B = np.array([[ph["eta"] / C1], [0.0]])
         num, den = signal.ss2tf(A, B, np.array([[0.0, 1.0]]), np.zeros((1, 1)))
@@ -229,7 +238,9 @@ def _valve_char(ph: dict, x, vs: float):
     so a nominal with the true parameters is the plant exactly and an input-scale
     error is exactly what the contract's re-fit may change."""
     grid = _valve_grid(vs)
-    return np.interp(ph["in_scale"] * np.asarray(x, float), grid, _valve_table(ph, grid, vs))
+    return np.interp(
+        ph["in_scale"] * np.asarray(x, float), grid, _valve_table(ph, grid, vs)
+    )
 
 
 # -------------------------------------------------------- linear sims -----
@@ -253,7 +264,7 @@ def _lsim(num, den, u, h):
     if sep > 1e-3 * max(np.max(np.abs(p)), 1e-300):
         r, p, k = signal.residue(num, den)
         y = np.zeros(u.shape[0])
-        for ri, pi in zip(r, p):
+        for ri, pi in zip(r, p, strict=True):
             a = np.exp(pi * h)
             beta = (a - 1) / pi
             x = signal.lfilter([0.0, beta], [1.0, -a], u.astype(complex))
@@ -305,7 +316,9 @@ def _excitation(rng, n: int) -> tuple[str, np.ndarray]:
             ampl = np.ones(k_max)
         ph = rng.uniform(0, 2 * np.pi, k_max)
         t = np.arange(n) / n
-        v = np.sum(ampl[:, None] * np.cos(2 * np.pi * lines[:, None] * t + ph[:, None]), 0)
+        v = np.sum(
+            ampl[:, None] * np.cos(2 * np.pi * lines[:, None] * t + ph[:, None]), 0
+        )
         return kind, amp * v / np.max(np.abs(v))
     if kind == "random_steps":  # levels held for random durations
         lo, hi = int(rng.integers(5, 40)), int(rng.integers(60, 300))
@@ -445,7 +458,13 @@ class _Plant:
             )
         elif cause == "backlash" and p == "valve_stiction":
             x = _stem_stiction(
-                vf, h, m, m * e["fc_over_fs"], e["vs"] * m / self.dt, e["w"] / self.dt, e["zeta"]
+                vf,
+                h,
+                m,
+                m * e["fc_over_fs"],
+                e["vs"] * m / self.dt,
+                e["w"] / self.dt,
+                e["zeta"],
             )
         elif cause == "rate_limit":
             x = _slew(vf, h, e["full_range"] / (m * self.dt), e["tp"] * self.dt)
@@ -537,7 +556,10 @@ def _draw_errors(rng, kind: str, ph: dict) -> dict:
 
 def _shape_for(rng, cause: str, kind: str) -> str:
     options = {
-        "backlash": {"servo_gear": ("gear_dead_band",), "valve_process": ("valve_stiction",)},
+        "backlash": {
+            "servo_gear": ("gear_dead_band",),
+            "valve_process": ("valve_stiction",),
+        },
         "dead_zone": {
             "valve_process": ("spool_overlap",),
             "msd": ("spool_overlap",),
@@ -586,7 +608,11 @@ MAG = {  # initial magnitude, bounds (units in _Plant.output)
 def _effect_constants(rng, cause, shape, plant_v, w0, u0, vs):
     e: dict = {}
     if cause == "time_delay":
-        e.update(a=rng.uniform(0, 0.15), period=rng.uniform(0.3, 1.5), phase=rng.uniform(0, 6.3))
+        e.update(
+            a=rng.uniform(0, 0.15),
+            period=rng.uniform(0.3, 1.5),
+            phase=rng.uniform(0, 6.3),
+        )
     elif cause == "dead_zone":
         e.update(knee=rng.uniform(0.05, 0.3), asym=rng.uniform(0.6, 1.5))
     elif cause == "backlash" and shape == "valve_stiction":
@@ -602,11 +628,17 @@ def _effect_constants(rng, cause, shape, plant_v, w0, u0, vs):
         e.update(
             u_hi=float(np.max(u0)),
             u_lo=float(np.min(u0)),
-            asym=rng.uniform(0.3, 1.2) if shape == "amplifier_rails" else rng.uniform(1.0, 1.1),
+            asym=rng.uniform(0.3, 1.2)
+            if shape == "amplifier_rails"
+            else rng.uniform(1.0, 1.1),
             knee=rng.uniform(0.03, 0.15) if shape == "amplifier_rails" else 1e-4,
         )
     elif cause == "preload":
-        e.update(u_std=float(np.std(u0)), eps=rng.uniform(0.005, 0.03), asym=rng.uniform(-0.3, 0.3))
+        e.update(
+            u_std=float(np.std(u0)),
+            eps=rng.uniform(0.005, 0.03),
+            asym=rng.uniform(-0.3, 0.3),
+        )
     elif cause == "output_nonlinearity":
         W = float(np.quantile(np.abs(w0), 0.98))
         e.update(
@@ -628,7 +660,9 @@ def _drift_shape(rng, shape, n, dt):
     if shape == "thermal_creep":
         d = 1 - np.exp(-t / (rng.uniform(0.2, 1.0) * T))
     elif shape == "random_walk":
-        d = signal.lfilter([1.0], [1.0, -rng.uniform(0.9, 0.99)], np.cumsum(rng.standard_normal(n)))
+        d = signal.lfilter(
+            [1.0], [1.0, -rng.uniform(0.9, 0.99)], np.cumsum(rng.standard_normal(n))
+        )
         d = d - d[0]
     else:
         ph = rng.uniform(0, 2 * np.pi)
@@ -670,7 +704,9 @@ def make_case(seed: int, index: int, cause: str) -> dict:
         case = _draw(rng, cause)
         if case is not None:
             return case
-    raise RuntimeError(f"family B: no valid {cause} case in 50 draws")  # pragma: no cover
+    raise RuntimeError(
+        f"family B: no valid {cause} case in 50 draws"
+    )  # pragma: no cover
 
 
 def _draw(rng, cause: str) -> dict | None:
@@ -697,7 +733,9 @@ def _draw(rng, cause: str) -> dict | None:
     magnitude = None
     if cause in STRUCTURAL:
         plant.cause = cause
-        plant.eff = _effect_constants(rng, cause, shape, v_est, w0["estimation"], u0, vs)
+        plant.eff = _effect_constants(
+            rng, cause, shape, v_est, w0["estimation"], u0, vs
+        )
         m0, lo, hi = MAG[cause]
         hi = plant.eff.pop("m_hi", hi)
         if cause == "backlash":
@@ -712,8 +750,15 @@ def _draw(rng, cause: str) -> dict | None:
             hist.append((m, E))
             if E > 0 and abs(math.log(E / target)) < 0.1:
                 break
-            if len(hist) >= 2 and hist[-1][1] > 0 and hist[-2][1] > 0 and hist[-1][0] != hist[-2][0]:
-                slope = math.log(hist[-1][1] / hist[-2][1]) / math.log(hist[-1][0] / hist[-2][0])
+            if (
+                len(hist) >= 2
+                and hist[-1][1] > 0
+                and hist[-2][1] > 0
+                and hist[-1][0] != hist[-2][0]
+            ):
+                slope = math.log(hist[-1][1] / hist[-2][1]) / math.log(
+                    hist[-1][0] / hist[-2][0]
+                )
                 slope = min(max(slope, 0.3), 4.0)
             else:
                 slope = 1.0
@@ -739,6 +784,7 @@ def _draw(rng, cause: str) -> dict | None:
             return None
     # the nominal model: the same physics with parameters off
     errors = _draw_errors(rng, kind, ph)
+
     def nominal_gap(scale):  # the larger of the two records'
         p_nom = _perturbed(ph, kind, errors, scale)
         return max(_rms(plant.linear_output(v, p_nom) - w0[r]) for r, v in recs.items())
@@ -754,7 +800,9 @@ def _draw(rng, cause: str) -> dict | None:
     ph_nom = _perturbed(ph, kind, errors, 1.0)
     gap_nominal = nominal_gap(1.0)
     if cause == "parameter_mismatch" and gap_nominal < 0.3 * sigma:
-        sigma = gap_nominal / rng.uniform(0.3, 2.0)  # keep it visible (SNR may pass 40 dB)
+        sigma = gap_nominal / rng.uniform(
+            0.3, 2.0
+        )  # keep it visible (SNR may pass 40 dB)
     # noise and noise-model causes
     records = {}
     for r, v in recs.items():
@@ -797,7 +845,11 @@ def _model_dict(plant: _Plant, ph_nom: dict) -> dict:
     tabulated valve characteristic covering the inputs."""
     num, den = _tf(plant.kind, ph_nom)
     num, den = num / den[-1], den / den[-1]  # time-constant form: den[-1] = 1
-    lin = {"kind": "continuous_tf", "num": [float(x) for x in num], "den": [float(x) for x in den]}
+    lin = {
+        "kind": "continuous_tf",
+        "num": [float(x) for x in num],
+        "den": [float(x) for x in den],
+    }
     if plant.kind == "valve_process":
         grid = _valve_grid(plant.vs)
         nl = {

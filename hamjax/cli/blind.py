@@ -24,7 +24,20 @@ def register(sub) -> None:
     )
     m.add_argument("--cases", type=positive_int, required=True, metavar="K")
     m.add_argument("--seed", type=int, default=0)
-    m.add_argument("--realism", choices=("exact", "realistic"), default="exact")
+    m.add_argument(
+        "--realism",
+        choices=("exact", "realistic"),
+        default=None,
+        help="family A only (default exact); family B is physical by construction",
+    )
+    m.add_argument(
+        "--family",
+        choices=("A", "B"),
+        default="A",
+        help="A: the catalogue's formulas (papers/gap/blind.py, default); B: physical "
+        "plants written independently of them (papers/gap/family_b.py, docs/family-b.md), "
+        "the held-out family no constant of the diagnosis is chosen on",
+    )
     m.add_argument("--out", type=Path, required=True)
     m.add_argument(
         "--force",
@@ -56,15 +69,27 @@ def _check_make_out(out: Path, force: bool) -> list[Path]:
 
 
 def run_make(args: argparse.Namespace) -> int:
-    import jax.random as jr
-
-    from ..papers.gap.blind import make_cases
     from ._outputs import remove_files
 
+    if args.family == "B" and args.realism is not None:
+        raise UserInputError(
+            "--realism applies to family A only (family B is physical by construction)"
+        )
     earlier = _check_make_out(args.out, args.force)
     remove_files(earlier, args.out)
-    truth = make_cases(jr.key(args.seed), args.cases, args.out, realism=args.realism)
-    print(f"wrote {len(truth['cases'])} {args.realism} cases to {args.out / 'cases'}")
+    if args.family == "B":
+        from ..papers.gap.family_b import make_cases as make_cases_b
+
+        truth = make_cases_b(args.seed, args.cases, args.out)
+        print(f"wrote {len(truth['cases'])} family-B cases to {args.out / 'cases'}")
+    else:
+        import jax.random as jr
+
+        from ..papers.gap.blind import make_cases
+
+        realism = args.realism or "exact"
+        truth = make_cases(jr.key(args.seed), args.cases, args.out, realism=realism)
+        print(f"wrote {len(truth['cases'])} {realism} cases to {args.out / 'cases'}")
     print(f"diagnose them with: hamjax diagnose {args.out / 'cases'}/* --out RESULTS")
     return 0
 

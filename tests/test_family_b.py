@@ -1,0 +1,264 @@
+"""Blind family B (papers/gap/family_b.py): physical-model gap cases, held out."""
+
+import hashlib
+import json
+import subprocess
+import sys
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hamjax.diagnosis.case import read_case
+from hamjax.io import load_model, read_json, write_json
+from hamjax.papers.gap import family_b as fb
+from hamjax.papers.gap.blind import EFFECTS
+
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _tree_hash(folder: Path) -> str:
+    h = hashlib.sha256()
+    for p in sorted(Path(folder).rglob("*")):
+        if p.is_file():
+            h.update(str(p.relative_to(folder)).encode())
+            h.update(p.read_bytes())
+    return h.hexdigest()
+
+
+@pytest.fixture(scope="module")
+def bench(tmp_path_factory):
+    out = tmp_path_factory.mktemp("family_b")
+    truth = fb.make_cases(0, 12, out)
+    return out, truth
+
+
+def test_classes_are_the_contracts_and_balanced():
+    assert set(fb.CLASSES) <= set(EFFECTS)
+    assert len(fb.CLASSES) == 12
+    labels = fb.classes_for(0, 240)
+    counts = Counter(labels)
+    assert set(counts) == set(fb.CLASSES)
+    assert set(counts.values()) == {20}
+    # every block of 12 is a permutation: every class appears in any 12 cases
+    assert set(fb.classes_for(5, 12)) == set(fb.CLASSES)
+
+
+def test_cases_are_valid_gap_case_folders(bench):
+    out, truth = bench
+    assert truth["family"] == "B"
+    assert read_json(out / "truth.json") == read_json(out / "truth.json")
+    names = sorted(p.name for p in (out / "cases").iterdir())
+    assert names == sorted(truth["cases"]) and len(names) == 12
+    seen = set()
+    for name in names:
+        folder = out / "cases" / name
+        assert sorted(p.name for p in folder.iterdir()) == [
+            "estimation.csv",
+            "model.json",
+            "validation.csv",
+        ]  # the truth never goes into a case folder
+        case = read_case(folder)
+        assert case.model is not None
+        tr = truth["cases"][name]
+        seen.add(tr["effect"])
+        assert tr["effect"] in fb.CLASSES and tr["noise_std"] > 0
+        n = case.estimation["t"].shape[0]
+        assert fb.N_SAMPLES[0] <= n <= fb.N_SAMPLES[1] == 4000
+        assert np.isclose(case.dt, fb.DT[tr["plant"]])
+        for rec in (case.estimation, case.validation):
+            assert np.all(np.isfinite(rec["y"]))
+        if tr["effect"] in fb.STRUCTURAL:  # sized after a re-fit: 0.3-2 x noise
+            assert (
+                0.8 * fb.RATIO[0] <= tr["effect_rms_over_noise"] <= 1.25 * fb.RATIO[1]
+            )
+        if tr["effect"] != "parameter_mismatch":  # SNR range (pm may pass 40 dB)
+            assert 10.0 - 1e-6 <= tr["snr_db"] <= 40.0 + 1e-6
+    assert seen == set(fb.CLASSES)
+
+
+def test_same_seed_same_files_and_cases_independent_of_count(bench, tmp_path):
+    out, _ = bench
+    again = fb.make_cases(0, 12, tmp_path / "again")
+    assert _tree_hash(out) == _tree_hash(tmp_path / "again")
+    assert again == read_json(out / "truth.json")
+    fewer = fb.make_cases(0, 3, tmp_path / "fewer")
+    for name in fewer["cases"]:
+        for f in ("model.json", "estimation.csv", "validation.csv"):
+            a = (tmp_path / "fewer" / "cases" / name / f).read_bytes()
+            assert a == (out / "cases" / name / f).read_bytes()
+    other = fb.make_cases(1, 3, tmp_path / "other")
+    assert other["cases"] != fewer["cases"]
+
+
+def test_none_cases_consistent_with_nominal_within_noise(tmp_path):
+    from hamjax.simulation.discrete import simulate
+
+    checked = 0
+    for i, cause in enumerate(fb.classes_for(2, 36)):
+        if cause != "none":
+            continue
+        case = fb.make_case(2, i, cause)
+        folder = tmp_path / f"c{i}"
+        write_json(folder / "model.json", case["model"])
+        plant, _ = load_model(folder / "model.json")
+        sigma = case["truth"]["noise_std"]
+        for rec in ("estimation", "validation"):
+            v, y, t = (case[rec][k] for k in ("v", "y", "t"))
+            w = np.asarray(simulate(plant, v, dt=float(t[1] - t[0])))
+            r = y - w
+            assert 0.9 < np.std(r) / sigma < 1.1
+            assert abs(np.mean(r)) < 4 * sigma / np.sqrt(len(r)) + 0.1 * sigma
+            # white: lag-1 autocorrelation near 0
+            rho = np.corrcoef(r[1:], r[:-1])[0, 1]
+            assert abs(rho) < 0.12
+        checked += 1
+    assert checked == 3
+
+
+def test_structural_nominal_errors_are_15_to_20_percent(bench):
+    _, truth = bench
+    for tr in truth["cases"].values():
+        errs = np.abs(list(tr["nominal_errors"].values()))
+        assert 2 <= len(errs) <= 4
+        if tr["effect"] in fb.STRUCTURAL or tr["effect"] == "parameter_mismatch":
+            assert np.all((errs >= 0.15 - 1e-12) & (errs <= 0.20 + 1e-12))
+        else:  # none / drift / coloured_noise: close to the truth
+            assert tr["nominal_gap_over_noise"] <= 0.1 + 1e-9
+
+
+def test_family_b_imports_nothing_of_the_diagnosis():
+    src = Path(fb.__file__).read_text()
+    assert "diagnosis" not in "\n".join(
+        line
+        for line in src.splitlines()
+        if line.lstrip().startswith(("import", "from"))
+    )
+    assert "jax" not in "\n".join(
+        line
+        for line in src.splitlines()
+        if line.lstrip().startswith(("import", "from"))
+    )
+
+
+def _numeric_hash(folder: Path) -> str:
+    """sha256 of the file names and their numbers at 10 significant digits: family A's
+    `realistic` draws move in the last bit with the environment (thread pools), the
+    same tree and environment give identical bytes; 10 digits see any real change."""
+    h = hashlib.sha256()
+    for p in sorted(Path(folder).rglob("*")):
+        if not p.is_file():
+            continue
+        h.update(str(p.relative_to(folder)).encode())
+        if p.suffix == ".csv":
+            x = np.loadtxt(p, delimiter=",", skiprows=1)
+            h.update(p.read_text().splitlines()[0].encode())
+            h.update(" ".join(f"{v:.10g}" for v in x.ravel()).encode())
+        else:
+            h.update(json.dumps(_rounded(read_json(p)), sort_keys=True).encode())
+    return h.hexdigest()
+
+
+def _rounded(obj):
+    if isinstance(obj, float):
+        return f"{obj:.10g}"
+    if isinstance(obj, dict):
+        return {k: _rounded(v) for k, v in obj.items()}
+    if isinstance(obj, list):
+        return [_rounded(v) for v in obj]
+    return obj
+
+
+# _numeric_hash of what `hamjax blind make --cases 3 --seed 7 --realism R` writes, taken
+# with the tree of commit 7171ad5 (before family B): family A must not move.
+FAMILY_A_HASH = {
+    "exact": "02133a281034c238c2fbbc728c0ecdd9d7ecba3835aebeee66e03987e484b609",
+    "realistic": "8c84a4b875da3b1f22142e00091b7ffa09cf8a7c296b34d438bde9e1b2b97bd5",
+}
+
+
+@pytest.mark.parametrize("realism", ["exact", "realistic"])
+def test_family_a_unchanged(realism, tmp_path):
+    out = tmp_path / "A"
+    r = _cli(
+        "blind",
+        "make",
+        "--cases",
+        "3",
+        "--seed",
+        "7",
+        "--realism",
+        realism,
+        "--out",
+        str(out),
+    )
+    assert r.returncode == 0, r.stderr
+    assert _numeric_hash(out) == FAMILY_A_HASH[realism]
+    # --family A is the default
+    r = _cli(
+        "blind",
+        "make",
+        "--family",
+        "A",
+        "--cases",
+        "3",
+        "--seed",
+        "7",
+        "--realism",
+        realism,
+        "--out",
+        str(tmp_path / "A2"),
+    )
+    assert r.returncode == 0, r.stderr
+    assert _numeric_hash(tmp_path / "A2") == FAMILY_A_HASH[realism]
+
+
+def _cli(*args, cwd=ROOT):
+    return subprocess.run(
+        [sys.executable, "-m", "hamjax", *args],
+        capture_output=True,
+        text=True,
+        cwd=cwd,
+        env={
+            "PYTHONPATH": str(ROOT),
+            "PATH": "/usr/bin:/bin",
+            "HAMJAX_CACHE_DIR": "off",
+        },
+    )
+
+
+def test_cli_blind_make_family_b(tmp_path):
+    r = _cli(
+        "blind",
+        "make",
+        "--family",
+        "B",
+        "--cases",
+        "2",
+        "--seed",
+        "4",
+        "--out",
+        str(tmp_path / "B"),
+    )
+    assert r.returncode == 0, r.stderr
+    assert "family-B" in r.stdout
+    truth = read_json(tmp_path / "B" / "truth.json")
+    assert truth["family"] == "B" and len(truth["cases"]) == 2
+    direct = fb.make_cases(4, 2, tmp_path / "direct")
+    assert truth == direct
+    r = _cli(
+        "blind",
+        "make",
+        "--family",
+        "B",
+        "--realism",
+        "exact",
+        "--cases",
+        "2",
+        "--out",
+        str(tmp_path / "X"),
+    )
+    assert r.returncode == 2 and "family A only" in r.stderr
+    assert not (tmp_path / "X").exists()

@@ -22,6 +22,7 @@ from ..simulation.sharding import (
 from . import storage
 from .config import MonteCarloConfig
 from .progress import progress_bar
+from .random import key_impl_name
 
 
 @eqx.filter_jit
@@ -63,7 +64,9 @@ def run_monte_carlo(
 
     **Arguments:**
 
-    - `key`: root key; realisation $r$ receives `jr.fold_in(key, r)`.
+    - `key`: root key; realisation $r$ receives `jr.fold_in(key, r)`. Its PRNG
+      implementation (`jax.random.key(seed, impl=...)`) is recorded in the
+      manifest: resuming with another is refused.
     - `trial`: `trial(key_r) -> pytree of arrays`, the per-realisation summaries
       (estimates, errors). A function or an `eqx.Module` (its arrays are traced, so
       changing them does not recompile). Use the same object across calls to reuse
@@ -130,11 +133,13 @@ def run_monte_carlo(
             study=config.name,
             seed=metadata.get("seed"),
             key_data=_key_data(key),
+            key_impl=key_impl_name(key),
             realisations=R,
             chunk=config.chunk,
             outputs=outputs,
             config=storage.jsonable(metadata),
             n_devices=n_devices,
+            n_processes=jax.process_count(),
         )
         done = storage.open_folder(out, manifest)
 

@@ -100,6 +100,7 @@ CHILD = textwrap.dedent(
 )
 
 
+@pytest.mark.slow
 def test_two_devices_give_the_one_device_draws(tmp_path):
     sharded = run_on_two_devices(CHILD, tmp_path, timeout=300)
     trial = make_trial(n_samples=120)

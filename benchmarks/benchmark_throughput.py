@@ -51,15 +51,35 @@ LEVELS = (-6.0, -3.0, 3.0, 6.0)
 B, A = (0.0, 1.0, -2.0), (1.0, -1.5, 0.56)
 WIDTH, INPUT_STD, NOISE_STD = 0.5, 1.0, 1.0
 HAMJAX = {
-    1: ("hamjax-time-major", "hamjax-vmap-scan", "hamjax-public-api", "hamjax-engine"),
+    1: (
+        "hamjax-time-major",
+        "hamjax-vmap-scan",
+        "hamjax-public-api",
+        "hamjax-public-batch",
+        "hamjax-engine",
+    ),
     # For workload 2 the public API (vmap of recursive_pl.normalised_gradient) is the
-    # vmap-of-scan form.
-    2: ("hamjax-time-major", "hamjax-public-api", "hamjax-engine"),
+    # vmap-of-scan form; the public batch is seed001.normalised_gradient_batch.
+    2: (
+        "hamjax-time-major",
+        "hamjax-public-api",
+        "hamjax-public-batch",
+        "hamjax-engine",
+    ),
 }
 PEERS = {
-    1: ("numpy-loop", "scipy-lfilter", "numba-njit", "numba-parallel"),
+    # numba-parallel-drawn: prange over realisations, each drawing its own normal
+    # inputs inside the loop (np.random seeded per realisation), as the engine does.
+    1: (
+        "numpy-loop",
+        "scipy-lfilter",
+        "numba-njit",
+        "numba-parallel",
+        "numba-parallel-drawn",
+    ),
     2: ("numpy-loop", "numba-njit", "numba-parallel"),
 }
+DRAWN = ("numba-parallel-drawn",)  # peers that draw their inputs (no data file)
 LOOPED = ("numpy-loop", "scipy-lfilter")  # timed on a subset, then scaled
 
 
@@ -98,13 +118,13 @@ def _workload2_setup(n_samples: int):
 def _workload2_trial(n_samples: int, unroll: int):
     import equinox as eqx
     import jax.numpy as jnp
-    import jax.random as jr
     from jaxtyping import Array
 
     from hamjax.identification import seed001 as rpl
     from hamjax.identification.seed001.normalised_gradient_4_1 import (
         normalised_gradient_time_major,
     )
+    from hamjax.montecarlo.random import normal_blocks
 
     v, w, g, theta_star, rho = _workload2_setup(n_samples)
 
@@ -119,7 +139,7 @@ def _workload2_trial(n_samples: int, unroll: int):
         unroll: int = eqx.field(static=True)
 
         def outputs(self, key):
-            return self.w + NOISE_STD * jr.normal(key, self.w.shape)
+            return self.w + NOISE_STD * normal_blocks(key, self.w.shape[0])
 
         def __call__(self, key):
             y = self.outputs(key)
@@ -280,6 +300,61 @@ def _numba_kernels():
     return sim, sim_parallel, ng, ng_parallel
 
 
+def _numba_drawn_kernel():
+    """Workload 1 in numba, each realisation drawing its own N(0, INPUT_STD^2)
+    input sample by sample inside the loop (no input array), over all cores."""
+    import numba
+
+    @numba.njit(cache=False)
+    def _drawn_plant(n, out):
+        # The same algorithm as _backlash_plant_py with v[k] drawn when needed.
+        c = WIDTH
+        b0, b1, b2 = B
+        a1, a2 = A[1], A[2]
+        vk = INPUT_STD * np.random.standard_normal()
+        vp = vk
+        u = vp
+        on_a = u == vp - c / 2
+        on_d = u == vp + c / 2
+        z0 = 0.0
+        z1 = 0.0
+        total = 0.0
+        squares = 0.0
+        peak = 0.0
+        for k in range(n):
+            if k > 0:
+                vk = INPUT_STD * np.random.standard_normal()
+            fa = vk - c / 2
+            fd = vk + c / 2
+            rising = vk > vp
+            falling = vk < vp
+            take_a = rising and (on_a or fa >= u)
+            take_d = falling and (on_d or fd <= u)
+            u_new = fa if take_a else (fd if take_d else u)
+            if rising or falling:
+                on_a = take_a or u_new == fa
+                on_d = take_d or u_new == fd
+            u = u_new
+            vp = vk
+            y = b0 * u + z0
+            z0 = (z1 + b1 * u) - a1 * y
+            z1 = (0.0 + b2 * u) - a2 * y
+            total += y
+            squares += y * y
+            peak = max(peak, abs(y))
+        out[0] = total / n
+        out[1] = math.sqrt(squares / n)
+        out[2] = peak
+
+    @numba.njit(parallel=True, cache=False)
+    def drawn_parallel(R, n, seed, out):
+        for r in numba.prange(R):
+            np.random.seed(seed + r)  # per realisation: any thread count
+            _drawn_plant(n, out[r])
+
+    return drawn_parallel
+
+
 # --- worker: one method in its own process ------------------------------------------
 
 
@@ -316,6 +391,8 @@ def _worker(args) -> None:
     baseline = _rss_mb()
     if method == "hamjax-engine":
         runs = [_run_engine(args, workload) for _ in range(args.repeats)]
+    elif method in DRAWN:
+        runs = [_run_numba_drawn(args) for _ in range(args.repeats)]
     elif method == "hamjax-ablation":
         result["ablation"] = _run_ablation(args, workload)
         result["peak_rss_mb"] = _rss_mb()
@@ -370,6 +447,20 @@ def _run_engine(args, workload):
     return pick(res), seconds, compile_s, args.realisations
 
 
+def _run_numba_drawn(args):
+    import numpy as np
+
+    drawn_parallel = _numba_drawn_kernel()
+    R = args.realisations
+    out = np.empty((R, 3))
+    t0 = time.perf_counter()
+    drawn_parallel(min(R, 4), 100, args.seed, out)
+    compile_s = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    drawn_parallel(R, args.samples, args.seed, out)
+    return out[:, 1], time.perf_counter() - t0, compile_s, R
+
+
 def _hamjax_on_data(data, batched_fn, chunk, devices=None, repeats=1):
     """Run `batched_fn(chunk of data (C, T)) -> (C, ...)` over the rows of `data`,
     sharded over the devices, the last chunk padded; returns outputs, the best of
@@ -422,7 +513,12 @@ def _batched_fns(workload, samples, unroll, aux):
             w = jax.vmap(lambda v: hj.simulate(plant, v))(V)
             return jnp.sqrt(jnp.mean(w**2, axis=1))
 
+        def public_batch(V):
+            w = hj.simulate_batch(plant, V, unroll=unroll)
+            return jnp.sqrt(jnp.mean(w**2, axis=1))
+
         return {
+            "hamjax-public-batch": public_batch,
             "hamjax-time-major": lambda V: output_summary_time_major(
                 plant, V.T, unroll=unroll
             )["rms"],
@@ -444,6 +540,9 @@ def _batched_fns(workload, samples, unroll, aux):
         ),
         "hamjax-vmap-scan": jax.vmap(one),
         "hamjax-public-api": jax.vmap(one),
+        "hamjax-public-batch": lambda Y: rpl.normalised_gradient_batch(
+            v, Y, levels=levels, order=2, theta0=jnp.zeros(10), rho=rho, unroll=unroll
+        ),
     }
 
 
@@ -690,7 +789,8 @@ def _orchestrate(args) -> int:
         data, aux = paths[workload]
         methods = {}
         for method in (*HAMJAX[workload], *PEERS[workload]):
-            methods[method] = _spawn(args, work, method, workload, data, aux)
+            given = (None, None) if method in DRAWN else (data, aux)
+            methods[method] = _spawn(args, work, method, workload, *given)
         tags = {m: str(work / f"w{workload}_{m}.json.npy") for m in methods}
         section = {
             "methods": methods,
@@ -730,6 +830,21 @@ def _orchestrate(args) -> int:
             "throughput": mem.get("throughput"),
             "under_2gb": (mem.get("peak_rss_mb") or 1e9) < 2048,
         }
+        small = report.get("workload1", {}).get("methods", {}).get("hamjax-engine", {})
+        if small.get("peak_rss_mb") and mem.get("peak_rss_mb"):
+            # Flat in R: the engine's peak at R = --realisations vs the probe's R.
+            report["memory"]["peak_rss_mb_at_realisations"] = {
+                str(args.realisations): small["peak_rss_mb"],
+                str(args.memory_realisations): mem["peak_rss_mb"],
+            }
+            report["memory"]["peak_ratio"] = mem["peak_rss_mb"] / small["peak_rss_mb"]
+    report["table"] = {
+        f"workload{w}": {
+            m: res.get("throughput")
+            for m, res in report.get(f"workload{w}", {}).get("methods", {}).items()
+        }
+        for w in (1, 2)
+    }
     report["targets"] = _targets(report)
     report["total_seconds"] = time.perf_counter() - t_start
     _write(out, report)
@@ -742,7 +857,12 @@ def _orchestrate(args) -> int:
 
 def _ratios(methods: dict) -> dict:
     ratios = {}
-    for h in ("hamjax-time-major", "hamjax-engine", "hamjax-public-api"):
+    for h in (
+        "hamjax-time-major",
+        "hamjax-engine",
+        "hamjax-public-api",
+        "hamjax-public-batch",
+    ):
         th = methods.get(h, {}).get("throughput")
         for peer, res in methods.items():
             tp = res.get("throughput")
@@ -753,9 +873,14 @@ def _ratios(methods: dict) -> dict:
 
 def _targets(report: dict) -> dict:
     out = {}
+    r1 = report.get("workload1", {}).get("ratios", {})
+    fair = r1.get("hamjax-engine / numba-parallel-drawn")
+    out["workload1 hamjax-engine >= 1.5x numba-parallel-drawn (both draw inside)"] = (
+        None if fair is None else bool(fair >= 1.5)
+    )
     for w in (1, 2):
         r = report.get(f"workload{w}", {}).get("ratios", {})
-        for h in ("hamjax-time-major", "hamjax-engine"):
+        for h in ("hamjax-public-batch", "hamjax-time-major", "hamjax-engine"):
             par = r.get(f"{h} / numba-parallel")
             loop = r.get(f"{h} / numpy-loop")
             out[f"workload{w} {h} >= 1.0x numba-parallel"] = (

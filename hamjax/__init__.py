@@ -52,6 +52,7 @@ from .signals import (
 from .simulation import (
     linear_response as linear_response,
     simulate as simulate,
+    simulate_batch as simulate_batch,
     simulate_diffrax as simulate_diffrax,
 )
 

@@ -10,6 +10,7 @@ import jax.numpy as jnp
 import jax.random as jr
 import jax.tree_util as jtu
 import numpy as np
+from jax.experimental import multihost_utils
 from jaxtyping import PyTree
 
 from .._types import Key
@@ -22,6 +23,7 @@ from ..simulation.sharding import (
 from . import storage
 from .config import MonteCarloConfig
 from .progress import progress_bar
+from .random import key_impl_name
 
 
 @eqx.filter_jit
@@ -63,7 +65,9 @@ def run_monte_carlo(
 
     **Arguments:**
 
-    - `key`: root key; realisation $r$ receives `jr.fold_in(key, r)`.
+    - `key`: root key; realisation $r$ receives `jr.fold_in(key, r)`. Its PRNG
+      implementation (`jax.random.key(seed, impl=...)`) is recorded in the
+      manifest: resuming with another is refused.
     - `trial`: `trial(key_r) -> pytree of arrays`, the per-realisation summaries
       (estimates, errors). A function or an `eqx.Module` (its arrays are traced, so
       changing them does not recompile). Use the same object across calls to reuse
@@ -122,6 +126,8 @@ def run_monte_carlo(
     ]
 
     done: list[tuple[int, int]] = []
+    finished: list[list[np.ndarray]] = []
+    # Several processes: process 0 alone touches the folder (see _open_folder).
     writer = out is not None and jax.process_index() == 0
     if out is not None:
         out = Path(out)
@@ -130,17 +136,22 @@ def run_monte_carlo(
             study=config.name,
             seed=metadata.get("seed"),
             key_data=_key_data(key),
+            key_impl=key_impl_name(key),
             realisations=R,
             chunk=config.chunk,
             outputs=outputs,
             config=storage.jsonable(metadata),
             n_devices=n_devices,
+            n_processes=jax.process_count(),
         )
-        done = storage.open_folder(out, manifest)
+        done, finished = _open_folder(out, manifest, outputs)
 
     pieces: dict[int, tuple[int, list[np.ndarray]]] = {}
     with progress_bar(
-        total=R, initial=sum(b - a for a, b in done), name=config.name, quiet=quiet
+        total=R,
+        initial=sum(b - a for a, b in done),
+        name=config.name,
+        quiet=quiet or jax.process_index() != 0,
     ) as bar:
         for start, stop in _todo(done, R, C):
             result = _run_chunk(trial, key, _indices(start), sharding)
@@ -149,8 +160,8 @@ def run_monte_carlo(
                 storage.write_chunk(out, start, stop, leaves)
             pieces[start] = (stop, leaves)
             bar.update(stop - start)
-    for start, stop in done:
-        pieces[start] = (stop, storage.read_chunk(out, start, stop, outputs))
+    for (start, stop), leaves in zip(done, finished, strict=True):
+        pieces[start] = (stop, leaves)
 
     starts = sorted(pieces)
     stacked = [
@@ -158,6 +169,41 @@ def run_monte_carlo(
         for i in range(len(out_leaves))
     ]
     return jtu.tree_unflatten(treedef, stacked)
+
+
+def _open_folder(
+    out: Path, manifest: dict, outputs: list[dict]
+) -> tuple[list[tuple[int, int]], list[list[np.ndarray]]]:
+    """Finished ranges of `out` and their outputs. With several processes, process
+    0 opens the folder and broadcasts both, so that every process computes the
+    same chunks and only process 0's machine needs the folder."""
+    if jax.process_count() == 1:
+        done = storage.open_folder(out, manifest)
+        return done, [storage.read_chunk(out, a, b, outputs) for a, b in done]
+    error, done, finished = "", [], []
+    if jax.process_index() == 0:
+        try:
+            done = storage.open_folder(out, manifest)
+            finished = [storage.read_chunk(out, a, b, outputs) for a, b in done]
+        except (OSError, ValueError) as err:
+            error = str(err)
+    failed, n_done = multihost_utils.broadcast_one_to_all(
+        np.array([bool(error), len(done)], np.int64)
+    )
+    if failed:
+        raise ValueError(error or "process 0 could not open the output folder")
+    ranges = np.zeros((int(n_done), 2), np.int64)
+    if done:
+        ranges[:] = done
+    ranges = multihost_utils.broadcast_one_to_all(ranges)
+    done = [(int(a), int(b)) for a, b in ranges]
+    if jax.process_index() != 0:
+        finished = [
+            [np.zeros((b - a, *o["shape"]), o["dtype"]) for o in outputs]
+            for a, b in done
+        ]
+    finished = [multihost_utils.broadcast_one_to_all(f) for f in finished]
+    return done, [[np.asarray(x) for x in f] for f in finished]
 
 
 def _todo(done: list[tuple[int, int]], R: int, C: int) -> list[tuple[int, int]]:

@@ -2,8 +2,9 @@
 
 Layout of `out/`:
 
-- `manifest.json`: what was run (study name, seed/key, R, C, the study's
-  configuration, output shapes) and the package versions;
+- `manifest.json`: what was run (study name, seed/key and the key's PRNG
+  implementation, R, C, the study's configuration, output shapes) and the package
+  versions (and the device and process counts, informational);
 - `chunks/chunk_<start>-<stop>.npz`: the per-realisation outputs of
   realisations `start <= r < stop`, one array `leaf_<i>` per output leaf.
 
@@ -36,6 +37,7 @@ _CHECKED = (
     "study",
     "seed",
     "key",
+    "key_impl",
     "realisations",
     "chunk",
     "outputs",
@@ -81,22 +83,26 @@ def make_manifest(
     study: str,
     seed: int | None,
     key_data: list,
+    key_impl: str,
     realisations: int,
     chunk: int,
     outputs: list[dict],
     config: dict,
     n_devices: int,
+    n_processes: int = 1,
 ) -> dict:
     manifest = {
         "format": FORMAT,
         "study": study,
         "seed": seed,
         "key": key_data,
+        "key_impl": key_impl,
         "realisations": realisations,
         "chunk": chunk,
         "outputs": outputs,
         "config": config,
         "devices": n_devices,
+        "processes": n_processes,
         "versions": package_versions(),
         "created": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
     }

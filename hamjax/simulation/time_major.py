@@ -1,35 +1,149 @@
-r"""Time-major batched simulation, for Monte Carlo throughput.
+r"""Time-major batched simulation: the fast form of `hamjax.simulate` for many inputs.
 
-`vmap` of a per-realisation `lax.scan` is correct but slow on CPU; the form here
-scans over time once, with the realisations as the vector axis inside the scan body
-(input `(time, batch)`), fuses the nonlinearity into the same scan, keeps only
-running summaries in the carry, and takes a static `unroll`. It equals the
-summaries of `hamjax.simulate` (tested), which remains the definition. Seed 001's
-(4.1) has its time-major form beside the reference, in
+`vmap` of a per-realisation `lax.scan` is correct but slow on CPU; the forms here
+scan over time once, with the realisations as the vector axis inside the scan body
+(input `(time, batch)`), step the nonlinearity and the linear block together, and
+take a static `unroll`. `simulate_time_major` returns the outputs (it is what
+`hamjax.simulate_batch` runs); `output_summary_time_major` keeps only running
+summaries in the carry; `output_summary_drawn` also draws its input block by block
+inside the scan (`hamjax.montecarlo.random`), so no input is stored. All equal
+`hamjax.simulate` (tested), which remains the definition. Seed 001's (4.1) has its
+time-major form beside the reference, in
 `identification/seed001/normalised_gradient_4_1.py`.
 """
 
+from collections.abc import Callable
+
+import equinox as eqx
 import jax
 import jax.lax as lax
 import jax.numpy as jnp
-from jaxtyping import Array, Float
+from jaxtyping import Array, Float, UInt
 
 from ..models import (
     AbstractHysteresisNonlinearity,
+    AbstractStaticNonlinearity,
+    ContinuousTransferFunction,
+    DiscreteStateSpace,
     DiscreteTransferFunction,
     Hammerstein,
 )
 
 
-def _check_plant(plant: Hammerstein) -> DiscreteTransferFunction:
+class _Stepper(eqx.Module):
+    """One sample of a plant for a batch: `state = init(v0)`, `step(state, v_k)`."""
+
+    plant: Hammerstein
+    linear: DiscreteTransferFunction | DiscreteStateSpace
+
+    def init(self, v0: Float[Array, " batch"]):
+        nl = self.plant.nonlinearity
+        s0 = (
+            jax.vmap(nl.init)(v0)
+            if isinstance(nl, AbstractHysteresisNonlinearity)
+            else None
+        )
+        if isinstance(self.linear, DiscreteTransferFunction):
+            n = max(self.linear.order, 1)
+        else:
+            n = self.linear.A.shape[0]
+        return s0, jnp.zeros((n, v0.shape[0]), v0.dtype)
+
+    def step(self, state, vk: Float[Array, " batch"]):
+        s, z = state
+        nl = self.plant.nonlinearity
+        if isinstance(nl, AbstractHysteresisNonlinearity):
+            s, u = jax.vmap(nl.step)(s, vk)
+        else:
+            u = nl(vk)
+        linear = self.linear
+        if isinstance(linear, DiscreteTransferFunction):
+            # Direct form II transposed, as DiscreteTransferFunction.response.
+            b, a = linear._padded()
+            n = linear.order
+            y = b[0] * u + (z[0] if n > 0 else 0.0)
+            if n > 0:
+                shifted = jnp.concatenate([z[1:], jnp.zeros_like(z[:1])], axis=0)
+                z = shifted + b[1:, None] * u[None] - a[1:, None] * y[None]
+        else:  # as DiscreteStateSpace.response
+            A, B, c, d = linear.A, linear.B[:, 0], linear.C[0], linear.D[0, 0]
+            y = c @ z + d * u
+            z = A @ z + B[:, None] * u[None]
+        return (s, z), y
+
+
+def stepper(plant: Hammerstein, *, dt: float | None = None) -> _Stepper:
+    """The batched one-sample step of `plant`; a continuous linear block is
+    discretised by zero-order hold at `dt`, as in `hamjax.simulate`."""
     if not isinstance(plant, Hammerstein):
         raise ValueError(f"plant must be a Hammerstein; got {type(plant).__name__}")
-    if not isinstance(plant.linear, DiscreteTransferFunction):
-        raise ValueError(
-            "the fused simulation needs a DiscreteTransferFunction linear block; got "
-            f"{type(plant.linear).__name__} (discretise it first)"
+    nl, linear = plant.nonlinearity, plant.linear
+    if not isinstance(nl, AbstractStaticNonlinearity | AbstractHysteresisNonlinearity):
+        raise TypeError(f"expected a hamjax nonlinearity; got {type(nl).__name__}")
+    if isinstance(linear, ContinuousTransferFunction):
+        if dt is None:
+            raise ValueError("a continuous linear block needs the sampling period `dt`")
+        linear = linear.discretise(dt)
+    elif isinstance(linear, DiscreteTransferFunction | DiscreteStateSpace):
+        own = linear.dt
+        if dt is not None and own is not None and abs(dt - own) > 1e-9 * own:
+            raise ValueError(
+                f"the data are sampled at dt = {dt:g} s but the discrete linear "
+                f"block has dt = {own:g} s"
+            )
+    else:
+        raise TypeError(f"unsupported linear block {type(linear).__name__}")
+    return _Stepper(plant, linear)
+
+
+def simulate_time_major(
+    plant: Hammerstein,
+    v: Float[Array, "time batch"],
+    *,
+    dt: float | None = None,
+    unroll: int = 1,
+) -> Float[Array, "time batch"]:
+    """Noise-free outputs of `plant` for a batch of inputs stored time-major."""
+    check_unroll(unroll)
+    if v.ndim != 2:
+        raise ValueError(f"v must be (time, batch); got shape {v.shape}")
+    st = stepper(plant, dt=dt)
+    _, w = lax.scan(lambda c, vk: st.step(c, vk), st.init(v[0]), v, unroll=unroll)
+    return w
+
+
+def simulate_batch_major(
+    plant: Hammerstein,
+    V: Float[Array, "batch time"],
+    *,
+    dt: float | None = None,
+    block: int = 50,
+    unroll: int = 1,
+) -> Float[Array, "batch time"]:
+    """`simulate_time_major` for inputs stored `(batch, time)`, without transposing
+    the whole batch: blocks of `block` samples are transposed in cache, scanned, and
+    written back in place."""
+    check_unroll(unroll)
+    if V.ndim != 2:
+        raise ValueError(f"V must be (batch, time); got shape {V.shape}")
+    st = stepper(plant, dt=dt)
+    batch, T = V.shape
+    K = max(1, min(block, T))
+    nb = -(-T // K)
+    # Zeros after the end: the response is causal, so the outputs kept are unchanged.
+    Vb = jnp.pad(V, ((0, 0), (0, nb * K - T))).reshape(batch, nb, K)
+
+    def outer(carry, b):
+        state, out = carry
+        v = lax.dynamic_index_in_dim(Vb, b, axis=1, keepdims=False).T
+        state, w = lax.scan(
+            lambda c, vk: st.step(c, vk), state, v, unroll=min(unroll, K)
         )
-    return plant.linear
+        return (state, lax.dynamic_update_index_in_dim(out, w.T, b, axis=1)), None
+
+    init = (st.init(V[:, 0]), jnp.zeros_like(Vb))
+    (_, out), _ = lax.scan(outer, init, jnp.arange(nb))
+    return out.reshape(batch, nb * K)[:, :T]
 
 
 def output_summary(
@@ -46,39 +160,79 @@ def output_summary(
     )
 
 
+def _summary_step(st: _Stepper):
+    def step(carry, vk):
+        state, total, squares, peak = carry
+        state, y = st.step(state, vk)
+        return (state, total + y, squares + y * y, jnp.maximum(peak, jnp.abs(y))), None
+
+    return step
+
+
+def _summaries(total, squares, peak, T: int) -> dict[str, Array]:
+    return {"mean": total / T, "rms": jnp.sqrt(squares / T), "max_abs": peak}
+
+
 def output_summary_time_major(
     plant: Hammerstein, v: Float[Array, "time batch"], *, unroll: int = 1
 ) -> dict[str, Float[Array, " batch"]]:
     """`output_summary` for a batch of inputs stored time-major, `(time, batch)`."""
-    linear = _check_plant(plant)
+    st = _discrete_stepper(plant)
     check_unroll(unroll)
     if v.ndim != 2:
         raise ValueError(f"v must be (time, batch); got shape {v.shape}")
-    nl = plant.nonlinearity
-    b, a = linear._padded()
-    n = linear.order
-    hysteresis = isinstance(nl, AbstractHysteresisNonlinearity)
-    s0 = jax.vmap(nl.init)(v[0]) if hysteresis else None
     zeros = jnp.zeros(v.shape[1], v.dtype)
+    init = (st.init(v[0]), zeros, zeros, zeros)
+    (_, total, squares, peak), _ = lax.scan(_summary_step(st), init, v, unroll=unroll)
+    return _summaries(total, squares, peak, v.shape[0])
 
-    def step(carry, vk):
-        s, z, total, squares, peak = carry
-        if hysteresis:
-            s, u = jax.vmap(nl.step)(s, vk)
-        else:
-            u = nl(vk)
-        # Direct form II transposed, as DiscreteTransferFunction.response.
-        y = b[0] * u + (z[0] if n > 0 else 0.0)
-        if n > 0:
-            shifted = jnp.concatenate([z[1:], zeros[None]], axis=0)
-            z = shifted + b[1:, None] * u[None] - a[1:, None] * y[None]
-        return (s, z, total + y, squares + y * y, jnp.maximum(peak, jnp.abs(y))), None
 
-    z0 = jnp.zeros((max(n, 1), v.shape[1]), v.dtype)
-    init = (s0, z0, zeros, zeros, zeros)
-    (_, _, total, squares, peak), _ = lax.scan(step, init, v, unroll=unroll)
-    T = v.shape[0]
-    return {"mean": total / T, "rms": jnp.sqrt(squares / T), "max_abs": peak}
+def output_summary_drawn(
+    plant: Hammerstein,
+    draw: Callable[[UInt[Array, ""]], Float[Array, "block batch"]],
+    *,
+    n_samples: int,
+    block: int,
+    unroll: int = 1,
+) -> dict[str, Float[Array, " batch"]]:
+    """`output_summary_time_major` of the input whose samples $[bK, (b+1)K)$ are
+    `draw(b)` ($K$ = `block`), drawn inside the scan: memory $O$(`block` x batch)."""
+    st = _discrete_stepper(plant)
+    check_unroll(unroll)
+    step = _summary_step(st)
+    n_full, rest = divmod(n_samples, block)
+
+    def run_block(carry, b, size):
+        v = draw(b)[:size]
+        carry, _ = lax.scan(step, carry, v, unroll=min(unroll, size))
+        return carry
+
+    v0 = draw(jnp.uint32(0))
+    zeros = jnp.zeros(v0.shape[1], v0.dtype)
+    carry = (st.init(v0[0]), zeros, zeros, zeros)
+    first = min(block, n_samples)
+    carry, _ = lax.scan(step, carry, v0[:first], unroll=min(unroll, first))
+    if n_full > 1:
+        carry, _ = lax.scan(
+            lambda c, b: (run_block(c, b, block), None),
+            carry,
+            jnp.arange(1, n_full, dtype=jnp.uint32),
+        )
+    if rest and n_full >= 1:
+        carry = run_block(carry, jnp.uint32(n_full), rest)
+    _, total, squares, peak = carry
+    return _summaries(total, squares, peak, n_samples)
+
+
+def _discrete_stepper(plant: Hammerstein) -> _Stepper:
+    if isinstance(plant, Hammerstein) and not isinstance(
+        plant.linear, DiscreteTransferFunction | DiscreteStateSpace
+    ):
+        raise ValueError(
+            "the fused simulation needs a discrete linear block; got "
+            f"{type(plant.linear).__name__} (discretise it first)"
+        )
+    return stepper(plant)
 
 
 def check_unroll(unroll) -> None:

@@ -9,6 +9,7 @@ from .levels_3_1 import check_levels as check_levels
 from .normalised_gradient_4_1 import (
     gradient_step as gradient_step,
     normalised_gradient as normalised_gradient,
+    normalised_gradient_batch as normalised_gradient_batch,
     normalised_gradient_convergence as normalised_gradient_convergence,
 )
 from .procedure import (

@@ -6,6 +6,7 @@ from jaxtyping import Array, Float, Int
 
 from ..._types import Signal
 from ...simulation.time_major import check_unroll
+from .reparametrisation_3_2_to_3_8 import regressor
 
 
 def normalised_gradient(
@@ -153,3 +154,35 @@ def normalised_gradient_time_major(
 
     (theta, _), _ = lax.scan(step, (theta, lags), (y, g, g_norm2), unroll=unroll)
     return theta.T
+
+
+def normalised_gradient_batch(
+    v: Signal,
+    Y: Float[Array, "batch time"],
+    *,
+    levels: Float[Array, " 4"],
+    order: int,
+    theta0: Float[Array, " p"],
+    rho: float,
+    unroll: int = 4,
+) -> Float[Array, "batch p"]:
+    r"""Final estimates of (4.1a-b) for many output records of one input `v`.
+
+    Equals `normalised_gradient(regressor(v, y, ...), y, ...)[0]` for each row `y`
+    of `Y` (tested), computed by `normalised_gradient_time_major`: the input part of
+    the regressor (3.8b) is built once and every step updates the whole batch.
+
+    **Arguments:** `v`, the common input `(time,)`; `Y`, the outputs
+    `(batch, time)`; `levels`, `order`, `theta0`, `rho` as in `normalised_gradient`
+    and `regressor`; `unroll`, the static unroll of the time scan.
+    """
+    Y = jnp.asarray(Y, dtype=float)
+    if Y.ndim != 2 or Y.shape[1:] != jnp.shape(v):
+        raise ValueError(
+            f"need Y (batch, time) with time = len(v); got {Y.shape}, {jnp.shape(v)}"
+        )
+    n = int(order)
+    g = regressor(v, jnp.zeros_like(v), levels=levels, order=n)[:, n:]
+    return normalised_gradient_time_major(
+        Y.T, g, order=n, theta0=jnp.asarray(theta0), rho=rho, unroll=unroll
+    )

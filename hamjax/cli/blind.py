@@ -122,8 +122,9 @@ def _result_path(results: Path, name: str, n_cases: int) -> Path:
     return per_case
 
 
-def _read_result(path: Path) -> tuple[str, tuple[float, float]]:
-    """The effect named in a diagnosis.json and its gaps before and after."""
+def _read_result(path: Path) -> tuple[str, tuple[float, float], float | None]:
+    """The effect named in a diagnosis.json, its gaps before and after, and the
+    probability it gives the named effect (None without `probabilities`)."""
     from ..io import read_json
 
     r = read_json(path)
@@ -134,21 +135,25 @@ def _read_result(path: Path) -> tuple[str, tuple[float, float]]:
         raise UserInputError(
             f"{path}: not a diagnosis (needs 'effect', 'gap_before', 'gap_after')"
         )
-    return r["effect"], (float(gaps[0]), float(gaps[1]))
+    probs = r.get("probabilities")
+    conf = float(probs.get(r["effect"], 0.0)) if isinstance(probs, dict) else None
+    return r["effect"], (float(gaps[0]), float(gaps[1])), conf
 
 
-def read_results(folder: Path, results: Path) -> tuple[dict, dict, dict]:
-    """`(truth, named, shrinks)` for `diagnosis.blind.score`; refuses RESULTS
-    without any result, and warns on stderr how many cases have none."""
+def read_results(folder: Path, results: Path) -> tuple[dict, dict, dict, dict]:
+    """`(truth, named, shrinks, confidences)` for `papers.gap.blind.score`; refuses
+    RESULTS without any result, and warns on stderr how many cases have none."""
     truth = _read_truth(folder)
     if not Path(results).is_dir():
         raise UserInputError(f"{results}: results folder not found")
     names = list(truth["cases"])
-    named, shrinks = {}, {}
+    named, shrinks, confidences = {}, {}, {}
     for name in names:
         path = _result_path(Path(results), name, len(names))
         if path.is_file():
-            named[name], shrinks[name] = _read_result(path)
+            named[name], shrinks[name], conf = _read_result(path)
+            if conf is not None:
+                confidences[name] = conf
     missing = [n for n in names if n not in named]
     if not named:
         raise UserInputError(
@@ -163,7 +168,7 @@ def read_results(folder: Path, results: Path) -> tuple[dict, dict, dict]:
             f"no diagnosis.json ({shown}); scoring the other {len(named)}",
             file=sys.stderr,
         )
-    return truth, named, shrinks
+    return truth, named, shrinks, confidences
 
 
 def run_score(args: argparse.Namespace) -> int:
@@ -172,8 +177,20 @@ def run_score(args: argparse.Namespace) -> int:
     from ._outputs import check_output_file
 
     check_output_file(args.results / "score.json", "RESULTS/score.json")
-    truth, named, shrinks = read_results(args.dir, args.results)
-    s = score(truth, named, shrinks)
+    truth, named, shrinks, confidences = read_results(args.dir, args.results)
+    s = score(truth, named, shrinks, confidences)
     print(format_score(s))
     write_json(args.results / "score.json", s)
+    if s.get("calibration"):
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        from ..plotting.diagnosis import plot_reliability
+
+        fig = plot_reliability(s["calibration"])
+        fig.tight_layout()
+        fig.savefig(args.results / "reliability.png", dpi=110)
+        plt.close(fig)
     return 0

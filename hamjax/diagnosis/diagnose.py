@@ -14,6 +14,7 @@ from .attribute import Attribution, attribute
 from .layout import bucket, describe_nominal, n_free_parameters, prepare
 from .locate import locate
 from .noise_fit import compile_in_background
+from .probabilities import probabilities
 from .schedule import CASES_PER_BATCH, batch_size, run_queue
 
 
@@ -29,6 +30,7 @@ class GapDiagnosis(eqx.Module):
     where: dict
     tests: dict
     gap_definition: str
+    probabilities: dict
     t: np.ndarray
     v: np.ndarray
     y: np.ndarray
@@ -105,8 +107,12 @@ def _result(prep, att: Attribution, val: dict) -> GapDiagnosis:
         att.noise_floor,
         prep.ctx.dt,
     )
+    mse = {"none": att.gap_before**2}
+    for c in ranking:
+        mse[c["effect"]] = min(mse.get(c["effect"], np.inf), c["gap_after"] ** 2)
     return GapDiagnosis(
         effect=att.effect,
+        probabilities=probabilities(att.effect, mse, len(val["y"]), att.shrink),
         gap_before=att.gap_before,
         gap_after=att.gap_after,
         noise_floor=att.noise_floor,

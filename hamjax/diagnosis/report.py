@@ -15,6 +15,7 @@ def diagnosis_dict(d) -> dict:
         "noise_floor": d.noise_floor,
         "ranking": d.ranking,
         "where": d.where,
+        "probabilities": d.probabilities,
         "shrink": d.shrink,
         "gap_definition": d.gap_definition,
         "tests": d.tests,
@@ -114,6 +115,16 @@ def report_markdown(d, name: str = "case", nominal: str | None = None) -> str:
         f"**Effect named: `{d.effect}`**",
         "",
     ]
+    top = sorted(d.probabilities.items(), key=lambda kv: -kv[1])
+    shown = [f"{k} {v:.2f}" for k, v in top if v >= 0.01][:4]
+    lines.append(f"- probabilities: {', '.join(shown)}")
+    close = [k for k, v in top[1:] if v >= 0.5 * top[0][1] and k != "unexplained"]
+    if close:
+        lines.append(
+            f"- `{d.effect}` and {', '.join(f'`{k}`' for k in close)} cannot be told "
+            "apart on these records: their validation errors are within the "
+            "evidence of a few samples (see the candidates below)"
+        )
     if nominal is not None:
         lines.append(f"- nominal model: {nominal}")
     lines += [

@@ -133,6 +133,26 @@ def plot_confusion(score: dict, ax: Axes | None = None) -> Figure:
     return fig
 
 
+def plot_reliability(calibration: dict, ax: Axes | None = None) -> Figure:
+    """Reliability diagram: per confidence bin, the accuracy of the diagnoses against
+    their mean stated probability (the diagonal is perfect calibration)."""
+    fig, ax = _axes(ax)
+    bins = calibration["bins"]
+    conf = [b["mean_confidence"] for b in bins]
+    acc = [b["accuracy"] for b in bins]
+    size = [20 + 4 * b["cases"] ** 0.75 for b in bins]
+    ax.plot([0, 1], [0, 1], color="0.6", lw=0.8, ls="--", label="calibrated")
+    ax.plot(conf, acc, color="C0", lw=1)
+    ax.scatter(conf, acc, s=size, color="C0", zorder=3, label="bins (area: cases)")
+    ax.set_xlim(0, 1)
+    ax.set_ylim(0, 1.02)
+    ax.set_xlabel("stated probability of the named effect")
+    ax.set_ylabel("fraction named correctly")
+    ax.set_title(f"reliability (ECE {calibration['ece']:.3f})")
+    ax.legend(fontsize=8, loc="upper left")
+    return fig
+
+
 def save_diagnosis_figures(d, out: Path, name: str = "case") -> list[Path]:
     """Write the four figures of a diagnosis of case `name` into `out`."""
     paths = []

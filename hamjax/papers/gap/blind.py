@@ -496,12 +496,43 @@ def make_cases(key, n_cases: int, out: Path, *, realism: str = "exact") -> dict:
 # ---------------------------------------------------------------- scoring ----
 
 
-def score(truth: dict, named: dict, shrinks: dict | None = None) -> dict:
-    """Confusion matrix, accuracy, false alarm on `none`, median shrink.
+def calibration(confidences: list[float], right: list[bool], bins: int = 10) -> dict:
+    """Reliability of stated confidences: per bin of confidence (width 1/bins) the
+    cases, their mean confidence and their accuracy, and the expected calibration
+    error (ECE, the case-weighted mean |confidence - accuracy| over the bins)."""
+    c, r = np.asarray(confidences, float), np.asarray(right, bool)
+    table, ece = [], 0.0
+    edges = np.linspace(0.0, 1.0, bins + 1)
+    for lo, hi in zip(edges[:-1], edges[1:], strict=True):
+        sel = (c > lo) & (c <= hi) if lo > 0 else (c >= lo) & (c <= hi)
+        if sel.any():
+            gap = abs(c[sel].mean() - r[sel].mean())
+            ece += sel.mean() * gap
+            table.append(
+                {
+                    "low": float(lo),
+                    "high": float(hi),
+                    "cases": int(sel.sum()),
+                    "mean_confidence": float(c[sel].mean()),
+                    "accuracy": float(r[sel].mean()),
+                }
+            )
+    return {"ece": float(ece) if c.size else float("nan"), "bins": table}
+
+
+def score(
+    truth: dict,
+    named: dict,
+    shrinks: dict | None = None,
+    confidences: dict | None = None,
+) -> dict:
+    """Confusion matrix, accuracy, false alarm on `none`, median shrink, and with
+    `confidences` the calibration of the probability of the named effect.
 
     **Arguments:** `truth` as in `truth.json`; `named` maps case name -> effect
     named; `shrinks` maps case name -> `(gap_before, gap_after)` (the shrink is
-    computed against the *true* noise std of the case).
+    computed against the *true* noise std of the case); `confidences` maps case
+    name -> the diagnosis's probability of the effect it named.
     """
     labels = list(EFFECTS) + ["unexplained"]
     matrix = {t: {p: 0 for p in labels} for t in EFFECTS}
@@ -524,7 +555,13 @@ def score(truth: dict, named: dict, shrinks: dict | None = None) -> dict:
             s = tr["noise_std"]
             if gb > s:
                 shrink_values.append((gb - ga) / (gb - s))
+    scored = [n for n in truth["cases"] if n in named and n in (confidences or {})]
+    calib = calibration(
+        [confidences[n] for n in scored],
+        [truth["cases"][n]["effect"] == named[n] for n in scored],
+    )
     return {
+        "calibration": calib if scored else None,
         "n_cases": total,
         "missing": missing,
         "accuracy": correct / total if total else float("nan"),
@@ -547,14 +584,16 @@ def score_folder(folder: Path, results: Path) -> dict:
             f"{truth_path}: not found (is {folder} a blind-benchmark folder?)"
         )
     truth = read_json(truth_path)
-    named, shrinks = {}, {}
+    named, shrinks, confidences = {}, {}, {}
     for name in truth["cases"]:
         p = Path(results) / name / "diagnosis.json"
         if p.is_file():
             r = read_json(p)
             named[name] = r["effect"]
             shrinks[name] = (r["gap_before"], r["gap_after"])
-    return score(truth, named, shrinks)
+            if isinstance(r.get("probabilities"), dict):
+                confidences[name] = float(r["probabilities"].get(r["effect"], 0.0))
+    return score(truth, named, shrinks, confidences)
 
 
 def format_score(s: dict) -> str:
@@ -572,6 +611,16 @@ def format_score(s: dict) -> str:
         f"{s['false_alarm_none']:.3f} (of {s['n_none']})  median shrink (deterministic) "
         f"{s['median_shrink_deterministic']:.3f}"
     )
+    if s.get("calibration"):
+        lines.append(
+            f"calibration of the named effect's probability: ECE "
+            f"{s['calibration']['ece']:.3f} ("
+            + ", ".join(
+                f"{b['mean_confidence']:.2f}->{b['accuracy']:.2f} ({b['cases']})"
+                for b in s["calibration"]["bins"]
+            )
+            + ")"
+        )
     if s["missing"]:
         lines.append(f"missing results: {len(s['missing'])}")
     return "\n".join(lines)

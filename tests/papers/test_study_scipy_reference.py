@@ -19,7 +19,7 @@ from hamjax.cli.main import main as hamjax_main
 
 
 SCRIPT = (
-    Path(__file__).resolve().parents[1] / "benchmarks" / "scipy_reference_diagnosis.py"
+    Path(__file__).resolve().parents[2] / "benchmarks" / "scipy_reference_diagnosis.py"
 )
 
 

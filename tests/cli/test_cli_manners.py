@@ -16,7 +16,7 @@ import hamjax
 from hamjax.cli.main import main
 
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def _hamjax(*args, cwd=None):

@@ -16,7 +16,7 @@ from hamjax.papers.gap import family_b as fb
 from hamjax.papers.gap.blind import EFFECTS
 
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def _tree_hash(folder: Path) -> str:

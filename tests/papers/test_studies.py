@@ -19,7 +19,7 @@ from hamjax.montecarlo.registry import discover_studies
 from hamjax.papers import STUDY_PACKAGES
 
 
-BENCHMARKS_DIR = Path(__file__).resolve().parents[1] / "benchmarks"
+BENCHMARKS_DIR = Path(__file__).resolve().parents[2] / "benchmarks"
 
 TINY = {
     "nbbi-rate": (["--ns", "3,6,12"], "nbbi_rate.json"),

@@ -363,7 +363,7 @@ def test_contract_check_nbbi_fgi_passes(shared_dir):
     if not tool.is_file():
         pytest.skip("contract_check.py not in ../shared/tools")
     env = dict(os.environ)
-    root = str(__import__("pathlib").Path(__file__).resolve().parents[1])
+    root = str(__import__("pathlib").Path(__file__).resolve().parents[2])
     env["PYTHONPATH"] = root + os.pathsep + env.get("PYTHONPATH", "")
     env["PATH"] = os.path.dirname(sys.executable) + os.pathsep + env["PATH"]
     out = subprocess.run(

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 STUDY = [
     "simulation-throughput",
     "--realisations",

@@ -16,7 +16,7 @@ import numpy as np
 from hamjax.montecarlo import MonteCarloConfig, run_monte_carlo, runner
 
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 R, C = 60, 2
 
 

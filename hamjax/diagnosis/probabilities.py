@@ -37,25 +37,20 @@ import math
 
 import numpy as np
 
+from .attribute import DETERMINISTIC_NAMES, NOISE_NAMES
 
+
+# The contract's classes: those the diagnosis tries, the two it does not try yet,
+# and `unexplained`.
 CLASSES = (
     "none",
-    "parameter_mismatch",
-    "backlash",
-    "dead_zone",
-    "saturation",
-    "preload",
-    "rate_limit",
-    "time_delay",
-    "extra_pole",
-    "output_nonlinearity",
-    "drift",
-    "coloured_noise",
+    *DETERMINISTIC_NAMES,
+    *NOISE_NAMES,
     "friction",
     "feedback_nonlinearity",
     "unexplained",
 )
-NOISE = ("drift", "coloured_noise")
+NOISE = NOISE_NAMES
 # Fitted on family A (module docstring): slope of the log-likelihood-ratio term,
 # then the offsets for none, parameter_mismatch, structural, noise verdicts.
 ALPHA = 0.33096653

@@ -9,6 +9,7 @@ from .files import (
     read_json as read_json,
     write_json as write_json,
 )
+from .gap_case import write_case as write_case
 from .model_json import (
     linear_from_dict as linear_from_dict,
     load_model as load_model,

@@ -77,22 +77,16 @@ def plot_nbbi_experiment(
     t, v, y, *, w=None, axes: tuple[Axes, Axes] | None = None
 ) -> Figure:
     """Fig. 6 analogue: the staircase input (4a-b) above, the noisy output below."""
-    if axes is None:
-        fig, axes = plt.subplots(2, 1, sharex=True, figsize=(7, 4.5))
-    else:
-        fig = axes[0].figure
-    ax_v, ax_y = axes
-    ax_v.step(np.asarray(t), np.asarray(v), where="post", color="C0", lw=1)
-    ax_v.set_ylabel("input v (units of v)")
-    ax_v.set_title("NBBI experiment: initialisation step, then the staircase")
-    ax_y.plot(np.asarray(t), np.asarray(y), color="C1", lw=0.4, label="noisy y")
-    if w is not None:
-        ax_y.plot(np.asarray(t), np.asarray(w), color="k", lw=1, label="noise-free w")
-        ax_y.legend(fontsize=8, loc="best")
-    ax_y.set_ylabel("output y (units of y)")
-    ax_y.set_xlabel("t (s)")
-    fig.tight_layout()
-    return fig
+    from .responses import plot_input_output
+
+    return plot_input_output(
+        t,
+        v,
+        y,
+        w=w,
+        axes=axes,
+        title="NBBI experiment: initialisation step, then the staircase",
+    )
 
 
 def _phase(g):

@@ -28,7 +28,7 @@ import jax.random as jr
 import numpy as np
 
 from ...diagnosis.attribute import DETERMINISTIC_NAMES, NOISE_NAMES
-from ...io import model_to_dict, read_json, write_csv, write_json
+from ...io import model_to_dict, read_json, write_case, write_json
 from ...models import (
     ContinuousTransferFunction,
     DiscreteTransferFunction,
@@ -483,12 +483,7 @@ def make_cases(key, n_cases: int, out: Path, *, realism: str = "exact") -> dict:
     truth = {"realism": realism, "cases": {}}
     for i in range(n_cases):
         case = make_case(jr.fold_in(key, i), realism=realism)
-        name = f"case_{i:04d}"
-        folder = out / "cases" / name
-        write_json(folder / "model.json", case["model"])
-        write_csv(folder / "estimation.csv", case["estimation"])
-        write_csv(folder / "validation.csv", case["validation"])
-        truth["cases"][name] = case["truth"]
+        truth["cases"][write_case(out, i, case)] = case["truth"]
     write_json(out / "truth.json", truth)
     return truth
 

@@ -32,7 +32,8 @@ from pathlib import Path
 import numpy as np
 from scipy import linalg, signal
 
-from ...io import write_csv, write_json
+from ...io import write_json
+from .blind import write_case
 
 
 # The contract's names (shared/contracts/gap-case.md) that family B draws: the
@@ -878,11 +879,6 @@ def make_cases(seed: int, n_cases: int, out: Path) -> dict:
     truth = {"family": "B", "seed": int(seed), "realism": "physical", "cases": {}}
     for i, cause in enumerate(classes_for(seed, n_cases)):
         case = make_case(seed, i, cause)
-        name = f"case_{i:04d}"
-        folder = out / "cases" / name
-        write_json(folder / "model.json", case["model"])
-        write_csv(folder / "estimation.csv", case["estimation"])
-        write_csv(folder / "validation.csv", case["validation"])
-        truth["cases"][name] = case["truth"]
+        truth["cases"][write_case(out, i, case)] = case["truth"]
     write_json(out / "truth.json", truth)
     return truth

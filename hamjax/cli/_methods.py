@@ -5,6 +5,7 @@ supports, `add_<verb>_arguments(parser)` and `<verb>(args) -> int | None`.
 """
 
 import importlib
+from pathlib import Path
 
 
 # verb -> {name on the command line: module}
@@ -41,4 +42,34 @@ def register_method_commands(sub, verb: str, help: str) -> None:
             raise
         p = methods.add_parser(name, help=(mod.__doc__ or "").strip().splitlines()[0])
         getattr(mod, f"add_{verb}_arguments")(p)
-        p.set_defaults(func=getattr(mod, verb))
+        if verb == "identify":
+            p.add_argument(
+                "--out",
+                type=Path,
+                default=None,
+                help="where to write result.json (default DIR/result.json)",
+            )
+        p.set_defaults(func=_checked(verb, getattr(mod, verb)))
+
+
+def result_path(args) -> Path:
+    """Where `hamjax identify` writes result.json: `--out`, or DIR/result.json."""
+    out = getattr(args, "out", None)
+    return Path(args.dir) / "result.json" if out is None else Path(out)
+
+
+def _checked(verb: str, run):
+    """`run` with its output location checked first (one line, before any work)."""
+    from functools import wraps
+
+    @wraps(run)
+    def checked(args):
+        from ._outputs import check_output_file, check_output_folder
+
+        if verb == "identify":
+            check_output_file(result_path(args), "--out")
+        elif getattr(args, "out", None) is not None:
+            check_output_folder(Path(args.out), "--out")
+        return run(args)
+
+    return checked

@@ -67,19 +67,29 @@ def _read_cases(args: argparse.Namespace, outs: list[Path]) -> tuple[list, int]:
 
 
 class _InOrder:
-    """Prints per-case lines in input order as cases finish in any order."""
+    """Prints per-case lines in input order as cases finish in any order, with a
+    progress bar of finished cases on a terminal's stderr (none with --quiet)."""
 
-    def __init__(self, quiet: bool):
+    def __init__(self, quiet: bool, total: int):
+        from ..montecarlo.progress import progress_bar
+
         self.quiet = quiet
         self.lines: dict[int, str] = {}
         self.next = 0
+        self.bar = progress_bar(
+            total=total, initial=0, name="diagnose", quiet=quiet, unit="case"
+        )
 
     def add(self, i: int, line: str) -> None:
         self.lines[i] = line
+        self.bar.update(1)
         while self.next in self.lines:
             if not self.quiet:
-                print(self.lines.pop(self.next), flush=True)
+                self.bar.write(self.lines.pop(self.next))
             self.next += 1
+
+    def close(self) -> None:
+        self.bar.close()
 
 
 def _line(name: str, d, verbose: bool) -> str:
@@ -127,7 +137,7 @@ def run(args: argparse.Namespace) -> int:
         items.append((plant, case.dt, case.estimation, case.validation))
         name = out.name if len(outs) > 1 else case.name
         where.append((case.folder, out, name, source))
-    printer = _InOrder(quiet)
+    printer = _InOrder(quiet, len(items))
 
     def write(i, d):  # each case is written as soon as its chunk is done
         folder, out, name, source = where[i]
@@ -147,6 +157,8 @@ def run(args: argparse.Namespace) -> int:
             raise UserInputError(
                 f"{args.cases[0] if len(args.cases) == 1 else 'cases'}: {err}"
             ) from None
+        finally:
+            printer.close()
     if not quiet:
         print(
             f"diagnosed {len(items)} case(s) in {time.perf_counter() - start:.1f} s",

@@ -11,6 +11,11 @@ from ..models import Hammerstein
 
 
 MIN_SAMPLES = 50
+# The batched fits hold every candidate row's copy of the records: peak memory grows
+# by about 3 KB per sample (2 million samples per record took 6.3 GB), so longer
+# records are refused before any work; decimate them first (an anti-aliasing
+# `scipy.signal.decimate`), which also suits the diagnosis's low-order models.
+MAX_SAMPLES = 500_000
 
 
 @dataclass(frozen=True)
@@ -30,6 +35,12 @@ def _check_record(path: Path, rec: dict) -> float:
     n = rec["t"].shape[0]
     if n < MIN_SAMPLES:
         raise UserInputError(f"{path}: only {n} samples (need at least {MIN_SAMPLES})")
+    if n > MAX_SAMPLES:
+        raise UserInputError(
+            f"{path}: {n} samples, more than the {MAX_SAMPLES} a diagnosis holds in "
+            f"memory (about 3 KB per sample): decimate the record first, e.g. "
+            f"scipy.signal.decimate(x, {int(np.ceil(n / MAX_SAMPLES))})"
+        )
     if np.ptp(rec["v"]) == 0:
         raise UserInputError(f"{path}: input v is constant (nothing to identify)")
     if np.ptp(rec["y"]) == 0:

@@ -196,3 +196,17 @@ def test_a_projection_radius_below_the_parameter_norm_is_constrained(tmp_path, c
     assert "raise --rho" in capsys.readouterr().err
     assert main(["identify", "recursive-pl", str(out)]) == 0
     assert json.loads((out / "result.json").read_text())["result"] == "successful"
+
+
+def test_identify_writes_where_out_says_and_checks_it_first(tmp_path, capsys):
+    out = _experiment(tmp_path)
+    _write_data(out, dict(k1=1.0, k2=2.0, d1=1.0, d2=-2.0, l1=1.0, l2=-2.0))
+    target = tmp_path / "elsewhere" / "r.json"
+    assert main(["identify", "recursive-pl", str(out), "--out", str(target)]) == 0
+    assert json.loads(target.read_text())["method"] == "recursive-pl"
+    assert not (out / "result.json").exists()
+    folder = tmp_path / "a_folder"
+    folder.mkdir()
+    assert main(["identify", "recursive-pl", str(out), "--out", str(folder)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "a_folder" in err[0] and "Traceback" not in err[0]

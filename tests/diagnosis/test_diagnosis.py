@@ -271,3 +271,25 @@ def test_diagnosis_without_float64_is_refused():
     )
     assert out.returncode == 0, out.stderr
     assert "needs float64: call hamjax.enable_x64()" in out.stdout
+
+
+def test_a_record_too_long_to_hold_is_refused_before_any_work(tmp_path):
+    # 3 KB per sample of peak memory: past MAX_SAMPLES a one-line refusal that says
+    # how to decimate, read from the files alone (no fit is started).
+    import numpy as np
+
+    from hamjax._errors import UserInputError
+    from hamjax.diagnosis.case import MAX_SAMPLES, read_case
+    from hamjax.io import write_csv
+
+    n = MAX_SAMPLES + 1
+    t = np.arange(n) * 0.01
+    rng = np.random.default_rng(0)
+    rec = {"t": t, "v": rng.normal(size=n), "y": rng.normal(size=n)}
+    write_csv(tmp_path / "estimation.csv", rec)
+    write_csv(tmp_path / "validation.csv", {k: x[:1000] for k, x in rec.items()})
+    with pytest.raises(UserInputError) as err:
+        read_case(tmp_path)
+    message = str(err.value)
+    assert "\n" not in message and "estimation.csv" in message
+    assert "decimate" in message and "scipy.signal.decimate(x, 2)" in message

@@ -13,6 +13,7 @@ from ...identification.seed000.fgi_table2 import identify_fgi
 from ...io import read_data, read_design, read_json, write_csv, write_json
 from ...signals import fgi_period_samples, initialisation_step, periodic_staircase
 from .._common import positive_float, positive_int
+from .._methods import result_path
 from .nbbi import check_levels
 
 
@@ -199,6 +200,7 @@ def add_identify_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def identify(args: argparse.Namespace) -> int:
+    out = result_path(args)
     folder: Path = args.dir
     if not 0 < args.epsilon < 1:
         raise UserInputError(f"--epsilon must be in (0, 1); got {args.epsilon}")
@@ -244,11 +246,11 @@ def identify(args: argparse.Namespace) -> int:
         "quadrature": args.quadrature,
         "discretisation": DISCRETISATION,
     }
-    write_json(folder / "result.json", result)
-    print(f"wrote {folder / 'result.json'}: {len(entries)} frequency-response points")
+    write_json(out, result)
+    print(f"wrote {out}: {len(entries)} frequency-response points")
     if args.refine:
         result.update(_refine(args, design, y, result))
-        write_json(folder / "result.json", result)
+        write_json(out, result)
         state = "converged" if result["converged"] else "did NOT converge"
         print(f"refinement {state}; added 'refined' and 'standard_errors'")
     return 0

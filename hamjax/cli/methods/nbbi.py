@@ -12,6 +12,7 @@ from ...identification.seed000.nbbi_table1 import identify_nbbi, narrow_message
 from ...io import read_data, read_design, write_csv, write_json
 from ...signals import initialisation_step, nbbi_staircase
 from .._common import float_list, positive_float
+from .._methods import result_path
 
 
 # ----------------------------------------------------------------------------- design
@@ -131,6 +132,7 @@ def add_identify_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def identify(args: argparse.Namespace) -> int:
+    out = result_path(args)
     folder: Path = args.dir
     design = read_design(folder, "nbbi")
     _, v = nbbi_input(design)
@@ -172,10 +174,8 @@ def identify(args: argparse.Namespace) -> int:
         "note": "U values in output units (G(0) = 1), cycle order of (4a-b); stderr "
         "assumes white noise; uncertainty adds the transient bias estimate",
     }
-    write_json(folder / "result.json", result)
-    print(
-        f"wrote {folder / 'result.json'}: {2 * len(design['levels']) - 2} cycle points"
-    )
+    write_json(out, result)
+    print(f"wrote {out}: {2 * len(design['levels']) - 2} cycle points")
     if args.refine:
         if not 1 <= args.den_order or not 0 <= args.num_order <= args.den_order:
             raise UserInputError(
@@ -194,7 +194,7 @@ def identify(args: argparse.Namespace) -> int:
             num_order=args.num_order,
         )
         result.update(refined)
-        write_json(folder / "result.json", result)
+        write_json(out, result)
         state = "converged" if refined["converged"] else "did NOT converge"
         print(f"refinement {state}; added 'refined' and 'standard_errors'")
     return 0

@@ -24,6 +24,7 @@ from ...io import read_data, read_design, write_csv, write_json
 from ...io.results import recursive_pl_result_dict
 from ...signals import pe_impulse_sequence
 from .._common import float_list, positive_float, positive_int
+from .._methods import result_path
 
 
 # ----------------------------------------------------------------------------- design
@@ -128,6 +129,7 @@ def add_identify_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def identify(args: argparse.Namespace) -> int:
+    out = result_path(args)
     folder: Path = args.dir
     design = read_design(folder, "recursive-pl", ("dt", "levels", "order", "periods"))
     _, v = designed_input(design)
@@ -152,8 +154,8 @@ def identify(args: argparse.Namespace) -> int:
         raise UserInputError(f"{folder / 'data.csv'}: {RESULTS[code]}")
     result = recursive_pl_result_dict(res, rho=args.rho, estimator=args.estimator)
     # The closed form is written first, so a failing refinement loses nothing.
-    write_json(folder / "result.json", result)
-    print(f"wrote {folder / 'result.json'}")
+    write_json(out, result)
+    print(f"wrote {out}")
     if getattr(args, "refine", False):
         from ...refinement import refine_recursive_pl_result
 
@@ -166,7 +168,7 @@ def identify(args: argparse.Namespace) -> int:
             structure=args.structure,
         )
         result.update(refined)
-        write_json(folder / "result.json", result)
+        write_json(out, result)
         state = "converged" if refined["converged"] else "did NOT converge"
         print(f"refinement {state}; added 'refined' and 'standard_errors'")
     if not result["consistent"]:
@@ -178,8 +180,7 @@ def identify(args: argparse.Namespace) -> int:
     if code in (RESULTS.degenerate, RESULTS.constrained):
         # Written (nothing is lost), but never called successful: exit 1.
         print(
-            f"hamjax: error: {folder / 'result.json'}: result {result['result']}: "
-            f"{RESULTS[code]}",
+            f"hamjax: error: {out}: result {result['result']}: {RESULTS[code]}",
             file=sys.stderr,
         )
         return 1

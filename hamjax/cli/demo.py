@@ -64,7 +64,10 @@ def run(args: argparse.Namespace) -> int:
             lines.append(f"## {title}\n\nFAILED (see the console output).\n")
             continue
         lines.append(f"## {title} ({time.perf_counter() - t0:.1f} s)\n")
-        lines.extend(f"- `{_relative(name, out)}`: {desc}" for name, desc in made)
+        lines.extend(
+            f"- [`{_relative(name, out)}`]({_relative(name, out)}): {desc}"
+            for name, desc in made
+        )
         lines.append("")
         _write_summary(out, lines, time.perf_counter() - start)
     _write_summary(out, lines, time.perf_counter() - start)
@@ -80,9 +83,16 @@ def _write_summary(out: Path, lines: list[str], elapsed: float) -> None:
 
 
 def _relative(name, out: Path) -> str:
-    path = Path(name)
-    return (
-        str(path.relative_to(out))
-        if path.is_absolute() and path.is_relative_to(out)
-        else str(name)
-    )
+    """`name` (a file a section wrote: a bare name, or a path through `out`)
+    relative to `out`, where summary.md is: the link works from the summary."""
+    path, root = Path(name), Path(out).resolve()
+    if not path.is_absolute() and not (Path(out) / path).exists():
+        path = path.resolve()  # a path given through `out`, e.g. OUT/diagnosis/x
+    if path.is_absolute():
+        resolved = path.resolve()
+        return (
+            str(resolved.relative_to(root))
+            if resolved.is_relative_to(root)
+            else str(path)
+        )
+    return str(path)

@@ -13,6 +13,7 @@ from ..models import (
     DiscreteTransferFunction,
     Hammerstein,
     Identity,
+    OutputScaled,
     PiecewiseLinear,
     Scaled,
     Shifted,
@@ -182,7 +183,14 @@ def _static_to_dict(nl) -> dict:
 def model_to_dict(plant: Hammerstein, dt: float | None = None, *, grid=None) -> dict:
     """The `model.json` dict of `plant`. A backlash whose borders are not tables is
     tabulated on `grid` (required then); scaled/shifted maps are tabulated likewise.
+
+    A backlash with its output scaled by $k$ (`OutputScaled`, seed 000's $kF$ when
+    $G(0) < 0$) has no form of its own in the contract: it is written as the
+    unscaled backlash before $kG$, the same plant from input to output.
     """
+    if isinstance(plant.nonlinearity, OutputScaled):
+        k = plant.nonlinearity.gain
+        plant = Hammerstein(plant.nonlinearity.inner, plant.linear.scaled(k))
     nl = plant.nonlinearity
     if isinstance(nl, Backlash):
         asc, desc = nl.ascending, nl.descending

@@ -183,3 +183,29 @@ def test_malformed_model_json_is_a_clear_error(tmp_path, change, match):
     with pytest.raises(UserInputError, match=match) as info:
         load_model(path)
     assert "model.json" in str(info.value)
+
+
+def test_a_backlash_with_a_negative_output_gain_round_trips(tmp_path):
+    # Seed 000's (kF, G/k) with G(0) < 0 gives OutputScaled(backlash, k < 0): it is
+    # written as the unscaled backlash before kG, which simulates the same output.
+    import jax.numpy as jnp
+
+    import hamjax as hj
+    from hamjax.io import load_model, model_to_dict, write_json
+    from hamjax.papers.seed000.plants import seed000_plant
+
+    plant, levels, dt, hold = seed000_plant()
+    assert isinstance(plant.nonlinearity, hj.OutputScaled)
+    assert float(plant.nonlinearity.gain) < 0
+    d = model_to_dict(plant, dt)
+    assert d["nonlinearity"]["kind"] == "backlash"
+    write_json(tmp_path / "model.json", d)
+    back, _ = load_model(tmp_path / "model.json")
+    _, v0 = hj.initialisation_step(levels, duration=hold / 4, dt=dt)
+    _, v1 = hj.nbbi_staircase(levels, hold=hold / 4, dt=dt)
+    v = jnp.concatenate([v0, v1])
+    w, w_back = hj.simulate(plant, v, dt=dt), hj.simulate(back, v, dt=dt)
+    scale = float(jnp.max(jnp.abs(w)))
+    # tables of 121 points reproduce the tabulated borders exactly; the rest is
+    # rounding of the ZOH of kG against G followed by k (a few ulps of |w|)
+    assert float(jnp.max(jnp.abs(w - w_back))) <= 1e-12 * scale

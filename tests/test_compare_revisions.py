@@ -1,0 +1,36 @@
+"""benchmarks/compare_revisions.py: two trees' JSON compared number by number."""
+
+import importlib.util
+from pathlib import Path
+
+
+SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "compare_revisions.py"
+
+
+def _module():
+    spec = importlib.util.spec_from_file_location("compare_revisions", SCRIPT)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_numbers_within_tolerance_are_equal_and_timings_are_ignored():
+    cmp = _module()
+    old = {"a": [1.0, 2.0], "b": {"c": 3.0, "seconds_per_case": 1.0}, "n": 4}
+    new = {
+        "a": [1.0, 2.0 * (1 + 1e-12)],
+        "b": {"c": 3.0, "seconds_per_case": 9.0},
+        "n": 4,
+    }
+    assert cmp._differences(old, new, 1e-9) == []
+
+
+def test_a_changed_number_a_missing_key_and_nan_are_reported():
+    cmp = _module()
+    old = {"a": [1.0, 2.0], "x": 1.0, "nan": float("nan"), "flag": True}
+    new = {"a": [1.0, 2.1], "nan": float("nan"), "flag": False}
+    diffs = cmp._differences(old, new, 1e-9)
+    assert any(d.startswith("/x: only in one") for d in diffs)
+    assert any(d.startswith("/a[1]:") for d in diffs)
+    assert any(d.startswith("/flag:") for d in diffs)
+    assert not any(d.startswith("/nan") for d in diffs)  # NaN equals NaN here

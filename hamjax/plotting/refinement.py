@@ -135,8 +135,12 @@ def plot_closed_form_vs_refined(
     ax.axhline(0, color="k", lw=0.8)
     # Linear within +-3 standard errors, logarithmic beyond: one far outlier no
     # longer flattens the points that sit inside the band.
-    if np.nanmax(np.abs(np.r_[z_closed, z_refined]), initial=0.0) > 6:
+    top = np.nanmax(np.abs(np.r_[z_closed, z_refined]), initial=0.0)
+    if top > 6:
         ax.set_yscale("symlog", linthresh=3.0)
+        ticks = [2.0] + [10.0**k for k in range(1, int(np.log10(top)) + 2)]
+        ticks = sorted([0.0] + [s * x for x in ticks for s in (-1, 1)])
+        ax.set_yticks(ticks, [f"{x:g}" for x in ticks])
     ax.set_xticks(x, names, rotation=45, fontsize=8)
     ax.set_ylabel("error / standard error")
     ax.legend(fontsize=7)

@@ -339,3 +339,23 @@ def test_unknown_compiler_option_falls_back_to_the_defaults(monkeypatch):
 
     with pytest.raises(RuntimeError, match="out of memory"):
         fit_module._compile(Broken())
+
+
+@pytest.mark.parametrize("kind", ["discrete", "continuous"])
+def test_numpy_nominal_response_equals_the_jax_simulator(kind):
+    # The diagnosis's host twin of the linear response (no compilation per record
+    # length) is the same map as `hamjax.simulate`'s: exact ZOH in continuous time.
+    import hamjax as hj
+    from hamjax.diagnosis.layout import _response_numpy
+
+    dt = 0.05
+    linear = (
+        hj.DiscreteTransferFunction([0.0, 0.3, 0.1], [1.0, -1.2, 0.5], dt=dt)
+        if kind == "discrete"
+        else hj.ContinuousTransferFunction([1.0, 2.0], [1.0, 1.4, 2.0])
+    )
+    u = np.random.default_rng(3).normal(size=400)
+    plant = hj.Hammerstein(hj.Identity(), linear)
+    ref = np.asarray(hj.simulate(plant, jnp.asarray(u), dt=dt))
+    got = _response_numpy(linear, u, dt)
+    np.testing.assert_allclose(got, ref, rtol=0, atol=1e-10 * np.max(np.abs(ref)))

@@ -23,6 +23,7 @@ SECTIONS = [
     ),
     ("refinement: closed form vs refined vs CRLB", "hamjax.demo.refinement"),
     ("diagnosis of a withheld-effect case", "hamjax.demo.diagnosis"),
+    ("diagnosis of a real plant (cascaded tanks)", "hamjax.demo.real_data"),
 ]
 
 

@@ -36,9 +36,52 @@ Decisions, in order:
   predictor of the nominal residual is significant against the white-noise
   predictor (the same two conditions);
 - otherwise `none`;
-- finally, a deterministic explanation that closes less than 80 % of the gap is
-  replaced by a significant noise-model effect whose one-step-ahead gap is lower
-  (a trend partly soaked up by a re-fit on estimation data is still a trend).
+- finally, a deterministic explanation $D$ that closes less than 80 % of the gap
+  is replaced by a significant noise-model effect $M$ (`drift` or
+  `coloured_noise`) whose one-step-ahead gap is lower (a trend partly soaked up
+  by a re-fit on estimation data is still a trend), **unless** $D$ with the same
+  noise model on top still improves significantly on the nominal model with it
+  (`_over_noise`): $M$, refitted on $D$'s own estimation residual, gives the
+  one-step-ahead errors $\\varepsilon_{D+M}$ of $D$ on validation, compared with
+  $\\varepsilon_{nom+M}$ (the $M$ candidate itself) by the same two conditions at
+  $z^\\star = 3.5$.
+
+  *Derivation of the veto.* The comparison is like for like: the same noise
+  model class on both sides, each side's noise parameter fitted on its own
+  estimation residual, both judged by one-step-ahead prediction on the
+  validation record. Under "the gap is noise of class $M$" ($y = w + e'$, no
+  deterministic effect) both predictors whiten the same process and differ by
+  the filtered difference $\\delta$ of two predictions fixed by the estimation
+  data, so $z$ is the held-out statistic of condition 1 and keeps its one-sided
+  level: the veto keeps a deterministic name on a noise case with probability
+  about $10^{-3}$ per candidate, Bonferroni-bounded over the candidates $D$ was
+  chosen from (the level of the deterministic-gap step, which this step
+  re-judges with the noise modelled). Under "effect $s$ plus noise of class
+  $M$", $\\varepsilon_{D+M}$ is the innovation and $\\varepsilon_{nom+M}$ adds
+  $A(q)\\,s$, $A$ the whitening filter of $M$: $D$ is judged on the part of the
+  effect that a coloured residual (or a local level) cannot predict one step
+  ahead. Without the veto, the bare comparison "one-step gap of $M$ below the
+  simulation gap of $D$" (unlike things) names `coloured_noise` for a
+  structural effect under coloured noise whenever the predictable part of the
+  coloured residual exceeds what $D$ leaves.
+
+  *Why the 0.8 stays.* The veto alone (replacing the 80 % condition, and the
+  lower-gap one, by it) was measured and rejected: one-step prediction by a
+  local level or an AR(1) of pole near 1 also predicts the slow residual that
+  an imperfectly shaped structural fit leaves on the other experiment, which
+  its own noise model, fitted on its (near-white) estimation residual, does not
+  track; the noise model then wins on structural cases (family A, realistic
+  seed 0: 0.942 -> 0.879; seed 100: 0.875 -> 0.833; exact: 0.992 -> 0.967).
+  The 80 % gate, which has no derivation, is therefore kept as the condition
+  for trying a noise model at all; $\\rho$, the shrink of 0.5 for
+  `unexplained`, $z^\\star$, $z_{struct}$ and the nested test's level are
+  unchanged.
+
+  Measured (`hamjax blind`, 240 cases each; the veto and its level chosen before
+  and without family B): family A realistic seed 0 / seed 100 / exact seed 100
+  0.942 / 0.875 / 0.992 -> 0.946 / 0.875 / 0.992; family B (held out) seeds 0 / 1
+  0.787 / 0.796 -> 0.800 / 0.808, structural cases named a noise model 47 -> 37
+  of 320; no `none`, `drift` or `coloured_noise` case changed its name.
 
 The noise floor $\\hat\\sigma$ is the white-noise level read off the upper half
 band of the chosen model's validation residual (`residuals.noise_floor_hf`).
@@ -163,6 +206,25 @@ def _nested_lr(
     }
 
 
+def _over_noise(noise_c: Candidate, r_est: np.ndarray, r_val: np.ndarray, sig) -> dict:
+    """The deterministic candidate with residuals `r_est`, `r_val` plus the noise
+    model of `noise_c`'s class (fitted on `r_est`), against the nominal model plus
+    the same noise model (`noise_c`): one-step-ahead errors on validation, the
+    batch-means test at $z^\\star$ (module docstring)."""
+    if not (np.all(np.isfinite(r_est)) and np.all(np.isfinite(r_val))):
+        return {"z": -np.inf, "significant": False, "noise": noise_c.effect}
+    value, err = noise_fit_numpy(r_est, r_val)[noise_c.effect]
+    ok, z = sig(noise_c.residual, err, rms(err) ** 2)
+    return {
+        "z": z,
+        "significant": bool(ok),
+        "noise": noise_c.effect,
+        "noise_param": value,
+        "gap_with_noise": rms(err),
+        "nominal_gap_with_noise": noise_c.gap_after,
+    }
+
+
 def attribute(prep: Prepared, fit: dict) -> Attribution:
     """Apply the significance rule to one case's fitted rows.
 
@@ -273,13 +335,20 @@ def attribute(prep: Prepared, fit: dict) -> Attribution:
         effect = "unexplained"
     # A slow trend or coloured noise that a re-fit partly soaks up on estimation
     # data leaves a deterministic "explanation" that closes the gap only partly,
-    # while the noise predictor reaches the floor: prefer the noise effect then.
+    # while the noise predictor reaches the floor: prefer the noise effect then,
+    # unless the deterministic explanation, with the same noise model on top,
+    # still improves significantly on the nominal model with it (like for like).
     if chosen is not None and chosen.measure == "simulation" and shrink < 0.8:
         noise_c, n_sig = noise_test()
         if n_sig and noise_c.gap_after < gap_after:
-            effect, chosen = noise_c.effect, noise_c
-            gap_after = floor = chosen.gap_after
-            shrink = 1.0
+            y_est = np.asarray(prep.arrays.y_est)[: prep.n_est]
+            r_est_det = y_est - np.asarray(fit["y_est"][chosen.row])[: prep.n_est]
+            test = _over_noise(noise_c, r_est_det, chosen.residual, sig)
+            tests["deterministic_over_noise"] = test
+            if not test["significant"]:
+                effect, chosen = noise_c.effect, noise_c
+                gap_after = floor = chosen.gap_after
+                shrink = 1.0
     order = sorted(cands.values(), key=lambda c: c.gap_after)
     if chosen is not None:
         order = [chosen] + [c for c in order if c is not chosen]

@@ -48,6 +48,9 @@ class RowFit(eqx.Module):
     params: Float[Array, "... S"]  # physical full parameter vector
     sse_est: Float[Array, "..."]
     y_val: Float[Array, "... L"]
+    # the fitted row's output on the estimation input (from rest): its estimation
+    # residual, on which `attribute` fits a noise model on top of the candidate
+    y_est: Float[Array, "... L"]
     result: RESULTS  # successful, or not_converged (stopped at its step budget)
     steps: Int[Array, "..."]  # Levenberg-Marquardt iterations taken
     lam: Float[Array, "..."]  # damping of the last proposed step (to continue)
@@ -238,12 +241,14 @@ def fit_row(
     used = row.idx < case.anchor.shape[0]
     dof = jnp.maximum(n - jnp.sum(used), 1.0)
     y_val = simulate_with_filter(p, b, a, row.tau, case.v_val, case, memory, table)
+    y_est = simulate_with_filter(p, b, a, row.tau, case.v_est, case, memory, table)
     sse_est = sse * case.y_scale**2
     return RowFit(
         theta=theta,
         params=p,
         sse_est=jnp.where(jnp.isfinite(sse_est), sse_est, jnp.inf),
         y_val=y_val,
+        y_est=y_est,
         result=RESULTS.where(done, RESULTS.successful, RESULTS.not_converged),
         steps=k,
         lam=lam,

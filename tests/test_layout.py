@@ -15,45 +15,20 @@ PACKAGE = Path(__file__).resolve().parents[1] / "hamjax"
 
 # Each top-level part of hamjax and the parts it may import (besides itself and
 # the private modules `hamjax._*`). Lower layers first.
+_CORE = {"models", "simulation", "signals"}
+_PROCEDURES = _CORE | {"io", "identification", "refinement", "diagnosis"}
 ALLOWED = {
     "models": set(),
     "simulation": {"models"},
     "signals": {"models", "simulation"},
-    "io": {"models", "simulation", "signals"},
-    "identification": {"models", "simulation", "signals"},
-    "refinement": {"models", "simulation", "signals", "identification"},
-    "montecarlo": {"models", "simulation", "signals", "io"},
-    "diagnosis": {"models", "simulation", "signals", "io", "refinement"},
-    "plotting": {
-        "models",
-        "simulation",
-        "signals",
-        "io",
-        "identification",
-        "diagnosis",
-    },
-    "papers": {
-        "models",
-        "simulation",
-        "signals",
-        "io",
-        "identification",
-        "refinement",
-        "montecarlo",
-        "diagnosis",
-        "plotting",
-    },
-    "demo": {
-        "models",
-        "simulation",
-        "signals",
-        "io",
-        "identification",
-        "refinement",
-        "diagnosis",
-        "plotting",
-        "papers",
-    },
+    "io": _CORE,
+    "identification": _CORE,
+    "refinement": _CORE | {"identification"},
+    "montecarlo": _CORE | {"io"},
+    "diagnosis": _CORE | {"io", "refinement"},
+    "plotting": _CORE | {"io", "identification", "diagnosis"},
+    "papers": _PROCEDURES | {"montecarlo", "plotting"},
+    "demo": _PROCEDURES | {"plotting", "papers"},
 }
 
 

@@ -20,7 +20,8 @@ DIAGNOSIS_OUTPUTS = (
     "validation.png",
     "ranking.png",
 )
-SCORE_OUTPUT = "score.json"
+# What `hamjax blind score` writes into RESULTS.
+SCORE_OUTPUTS = ("score.json", "reliability.png")
 # What `hamjax blind make` writes: DIR/truth.json and DIR/cases/<case>/ holding these.
 BLIND_CASE_FILES = ("model.json", "estimation.csv", "validation.csv")
 
@@ -71,7 +72,9 @@ def earlier_diagnosis(out: Path) -> list[Path]:
     out = Path(out)
     if not out.is_dir():
         return []
-    found = [out / n for n in (*DIAGNOSIS_OUTPUTS, SCORE_OUTPUT) if (out / n).is_file()]
+    found = [
+        out / n for n in (*DIAGNOSIS_OUTPUTS, *SCORE_OUTPUTS) if (out / n).is_file()
+    ]
     for sub in sorted(p for p in out.iterdir() if p.is_dir()):
         found += [sub / n for n in DIAGNOSIS_OUTPUTS if (sub / n).is_file()]
     return found

@@ -4,8 +4,9 @@ A method module (e.g. `hamjax.cli.methods.recursive_pl`) defines, for each verb 
 supports, `add_<verb>_arguments(parser)` and `<verb>(args) -> int | None`.
 """
 
-import importlib
 from pathlib import Path
+
+from ._common import optional_module
 
 
 # verb -> {name on the command line: module}
@@ -34,12 +35,9 @@ def register_method_commands(sub, verb: str, help: str) -> None:
     )
     methods.required = True
     for name, module in METHODS[verb].items():
-        try:
-            mod = importlib.import_module(module)
-        except ModuleNotFoundError as err:
-            if err.name == module:
-                continue
-            raise
+        mod = optional_module(module)
+        if mod is None:
+            continue
         p = methods.add_parser(name, help=(mod.__doc__ or "").strip().splitlines()[0])
         getattr(mod, f"add_{verb}_arguments")(p)
         if verb == "identify":

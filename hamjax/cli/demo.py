@@ -1,12 +1,13 @@
 """`hamjax demo [--out DIR]`: the pictures a person wants first, on built-in plants."""
 
 import argparse
-import importlib
 import time
 import traceback
 from pathlib import Path
 
 import jax.random as jr
+
+from ._common import optional_module
 
 
 # Each section module defines `run(key, out) -> [(file, description), ...]`. A
@@ -49,12 +50,9 @@ def run(args: argparse.Namespace) -> int:
     lines, failed = [], 0
     start = time.perf_counter()
     for i, (title, module) in enumerate(SECTIONS):
-        try:
-            mod = importlib.import_module(module)
-        except ModuleNotFoundError as err:
-            if err.name == module:
-                continue
-            raise
+        mod = optional_module(module)
+        if mod is None:
+            continue
         t0 = time.perf_counter()
         print(f"[demo] {title} ...", flush=True)
         try:

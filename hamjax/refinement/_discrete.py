@@ -1,10 +1,12 @@
 """Shared pieces of the seed-001 parametrisations (discrete $B/A$, $b$ on a chart)."""
 
+import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float
 
-from .._types import Signal
+from .._types import Params, Signal
 from ..models import DiscreteTransferFunction
+from ._parametrisation import AbstractParametrisation
 
 
 def discrete_response(
@@ -21,3 +23,26 @@ def discrete_stable(a: Float[Array, " n"]) -> Bool[Array, ""]:
     block's own traced `stable`)."""
     den = jnp.concatenate([jnp.ones(1), a])
     return DiscreteTransferFunction(jnp.ones(1), den).stable()
+
+
+class AbstractDiscreteParametrisation(AbstractParametrisation):
+    """$\\theta = (a, \\delta, \\text{map})$ of a discrete plant of order $n$ =
+    `len(b_ref)`: the $n$ coefficients of $A$, the $n - 1$ chart coordinates
+    $\\delta$ of $b$ at `b_ref`, then the parameters of the map."""
+
+    b_ref: eqx.AbstractVar[Float[Array, " n"]]
+
+    @property
+    def order(self) -> int:
+        return self.b_ref.shape[0]
+
+    def _ab_names(self) -> tuple[str, ...]:
+        """`a1..an, b1..bn`: the names of the physical $(a, b)$."""
+        n = self.order
+        return tuple(f"a{i + 1}" for i in range(n)) + tuple(
+            f"b{i + 1}" for i in range(n)
+        )
+
+    def _split(self, theta: Params):
+        n = self.order
+        return theta[:n], theta[n : 2 * n - 1], theta[2 * n - 1 :]

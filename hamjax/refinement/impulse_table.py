@@ -11,12 +11,15 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Bool, Float
 
 from .._types import Params, Signal
-from ._discrete import discrete_response, discrete_stable
-from ._parametrisation import AbstractParametrisation
+from ._discrete import (
+    AbstractDiscreteParametrisation,
+    discrete_response,
+    discrete_stable,
+)
 from .normalisation import normalise_b, sphere_coordinates, sphere_point
 
 
-class ImpulseTableParametrisation(AbstractParametrisation):
+class ImpulseTableParametrisation(AbstractDiscreteParametrisation):
     """$\\theta = (a_1..a_n, \\delta_1..\\delta_{n-1}, F(V_1)..F(V_4))$, where
     $\\delta$ is a chart of $\\sum b_i^2 = 1$ at `b_ref` (Eq. (3.10)).
 
@@ -46,21 +49,8 @@ class ImpulseTableParametrisation(AbstractParametrisation):
             raise ValueError(f"b_ref must be 1-D and non-empty; got {self.b_ref.shape}")
 
     @property
-    def order(self) -> int:
-        return self.b_ref.shape[0]
-
-    @property
     def names(self) -> tuple[str, ...]:
-        n = self.order
-        return (
-            tuple(f"a{i + 1}" for i in range(n))
-            + tuple(f"b{i + 1}" for i in range(n))
-            + tuple(f"F(V{j + 1})" for j in range(4))
-        )
-
-    def _split(self, theta: Params):
-        n = self.order
-        return theta[:n], theta[n : 2 * n - 1], theta[2 * n - 1 :]
+        return self._ab_names() + tuple(f"F(V{j + 1})" for j in range(4))
 
     def table_input(self, f: Float[Array, " 4"], v: Signal) -> Signal:
         """$u = F(v)$ for $v \\in \\{0, V_1..V_4\\}$ (the nearest value is used)."""

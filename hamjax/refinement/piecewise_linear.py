@@ -24,8 +24,11 @@ from jaxtyping import Array, ArrayLike, Bool, Float
 from .._checks import concrete
 from .._types import Params, Signal
 from ..models.nonlinearities.piecewise_linear import piecewise_linear_map
-from ._discrete import discrete_response, discrete_stable
-from ._parametrisation import AbstractParametrisation
+from ._discrete import (
+    AbstractDiscreteParametrisation,
+    discrete_response,
+    discrete_stable,
+)
 from .normalisation import normalise_b, sphere_coordinates, sphere_point
 
 
@@ -47,7 +50,7 @@ def smoothed_piecewise_linear(
     )
 
 
-class PiecewiseLinearParametrisation(AbstractParametrisation):
+class PiecewiseLinearParametrisation(AbstractDiscreteParametrisation):
     """$\\theta = (a_1..a_n, \\delta_1..\\delta_{n-1}, k_1, k_2, d_1, d_2, l_1, l_2)$,
     $\\delta$ a chart of $\\sum b_i^2 = 1$ at `b_ref` (Eq. (3.10)).
 
@@ -85,21 +88,8 @@ class PiecewiseLinearParametrisation(AbstractParametrisation):
         return PiecewiseLinearParametrisation(self.b_ref, width)
 
     @property
-    def order(self) -> int:
-        return self.b_ref.shape[0]
-
-    @property
     def names(self) -> tuple[str, ...]:
-        n = self.order
-        return (
-            tuple(f"a{i + 1}" for i in range(n))
-            + tuple(f"b{i + 1}" for i in range(n))
-            + _MAP
-        )
-
-    def _split(self, theta: Params):
-        n = self.order
-        return theta[:n], theta[n : 2 * n - 1], theta[2 * n - 1 :]
+        return self._ab_names() + _MAP
 
     def predict(self, theta: Params, v: Signal) -> Signal:
         a, delta, m = self._split(theta)

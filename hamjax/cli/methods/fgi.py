@@ -11,10 +11,17 @@ from ..._errors import UserInputError
 from ..._results import RESULTS
 from ...identification.seed000.fgi_table2 import identify_fgi
 from ...io import read_data, read_design, read_json, write_csv, write_json
-from ...signals import fgi_period_samples, initialisation_step, periodic_staircase
-from .._common import positive_float, positive_int
+from ...signals import fgi_period_samples, periodic_staircase
+from .._common import (
+    add_data_folder,
+    add_experiment_folder,
+    add_init_duration,
+    add_sampling_period,
+    positive_float,
+    positive_int,
+)
 from .._methods import result_path
-from .nbbi import check_levels
+from .nbbi import check_levels, design_start
 
 
 DISCRETISATION = (
@@ -36,9 +43,7 @@ def add_experiment_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--periods", type=positive_int, required=True, help="M periods averaged (20)"
     )
-    p.add_argument(
-        "--dt", type=positive_float, required=True, help="sampling period (s)"
-    )
+    add_sampling_period(p, help="sampling period (s)")
     p.add_argument(
         "--transient-periods",
         type=int,
@@ -46,13 +51,8 @@ def add_experiment_arguments(p: argparse.ArgumentParser) -> None:
         help="periods discarded before the M averaged ones (default: enough to cover "
         "the NBBI hold time N*Tr, which was chosen long enough to settle)",
     )
-    p.add_argument(
-        "--init-duration",
-        type=positive_float,
-        default=None,
-        help="T0 of the initialisation step (3), seconds (default: the NBBI one)",
-    )
-    p.add_argument("--out", type=Path, required=True, help="experiment folder")
+    add_init_duration(p, default="the NBBI one")
+    add_experiment_folder(p)
 
 
 def experiment(args: argparse.Namespace) -> int:
@@ -136,12 +136,8 @@ def experiment(args: argparse.Namespace) -> int:
 
 def fgi_input(design: dict) -> tuple[np.ndarray, np.ndarray]:
     """The designed input: initialisation (3), then (24) for each omega block."""
-    levels = jnp.asarray(design["levels"], dtype=float)
-    dt = float(design["dt"])
     try:
-        _, v0 = initialisation_step(
-            levels, duration=float(design["init_duration"]), dt=dt
-        )
+        levels, dt, v0 = design_start(design)
         parts = [np.asarray(v0)]
         for b in design["blocks"]:
             _, vb = periodic_staircase(
@@ -158,7 +154,7 @@ def fgi_input(design: dict) -> tuple[np.ndarray, np.ndarray]:
 
 
 def add_identify_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("dir", type=Path, help="experiment folder with data.csv")
+    add_data_folder(p)
     p.add_argument(
         "--epsilon",
         type=float,

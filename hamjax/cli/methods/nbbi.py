@@ -11,7 +11,14 @@ from ..._errors import UserInputError
 from ...identification.seed000.nbbi_table1 import identify_nbbi, narrow_message
 from ...io import read_data, read_design, write_csv, write_json
 from ...signals import initialisation_step, nbbi_staircase
-from .._common import float_list, positive_float
+from .._common import (
+    add_data_folder,
+    add_experiment_folder,
+    add_init_duration,
+    add_levels,
+    add_sampling_period,
+    positive_float,
+)
 from .._methods import result_path
 
 
@@ -19,25 +26,15 @@ from .._methods import result_path
 
 
 def add_experiment_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument(
-        "--levels",
-        type=float_list,
-        required=True,
-        help="V1,...,Vn strictly increasing, n >= 3 (e.g. --levels=-1,-0.5,0,0.5,1)",
+    add_levels(
+        p, help="V1,...,Vn strictly increasing, n >= 3 (e.g. --levels=-1,-0.5,0,0.5,1)"
     )
     p.add_argument(
         "--hold", type=positive_float, required=True, help="seconds per level (N*Tr)"
     )
-    p.add_argument(
-        "--dt", type=positive_float, required=True, help="sampling period (s)"
-    )
-    p.add_argument(
-        "--init-duration",
-        type=positive_float,
-        default=None,
-        help="T0 of the initialisation step (3), seconds (default: --hold)",
-    )
-    p.add_argument("--out", type=Path, required=True, help="experiment folder")
+    add_sampling_period(p, help="sampling period (s)")
+    add_init_duration(p, default="--hold")
+    add_experiment_folder(p)
 
 
 def experiment(args: argparse.Namespace) -> int:
@@ -81,14 +78,19 @@ def check_levels(levels, what: str) -> list[float]:
     return levels
 
 
-def nbbi_input(design: dict) -> tuple[np.ndarray, np.ndarray]:
-    """The designed input: initialisation (3) then staircase (4a-b)."""
+def design_start(design: dict) -> tuple[jnp.ndarray, float, jnp.ndarray]:
+    """`(levels, dt, v0)` of a staircase design (NBBI's or FGI's): its levels, its
+    sampling period and its initialisation step (3) of `init_duration` seconds."""
     levels = jnp.asarray(design["levels"], dtype=float)
     dt = float(design["dt"])
+    _, v0 = initialisation_step(levels, duration=float(design["init_duration"]), dt=dt)
+    return levels, dt, v0
+
+
+def nbbi_input(design: dict) -> tuple[np.ndarray, np.ndarray]:
+    """The designed input: initialisation (3) then staircase (4a-b)."""
     try:
-        _, v0 = initialisation_step(
-            levels, duration=float(design["init_duration"]), dt=dt
-        )
+        levels, dt, v0 = design_start(design)
         _, v1 = nbbi_staircase(levels, hold=float(design["hold"]), dt=dt)
     except ValueError as err:
         raise UserInputError(str(err)) from None
@@ -100,7 +102,7 @@ def nbbi_input(design: dict) -> tuple[np.ndarray, np.ndarray]:
 
 
 def add_identify_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("dir", type=Path, help="experiment folder with data.csv")
+    add_data_folder(p)
     g = p.add_mutually_exclusive_group()
     g.add_argument(
         "--discard",

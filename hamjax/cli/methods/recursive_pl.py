@@ -23,7 +23,14 @@ from ...identification.seed001 import (
 from ...io import read_data, read_design, write_csv, write_json
 from ...io.results import recursive_pl_result_dict
 from ...signals import pe_impulse_sequence
-from .._common import float_list, positive_float, positive_int
+from .._common import (
+    add_data_folder,
+    add_experiment_folder,
+    add_levels,
+    add_sampling_period,
+    positive_float,
+    positive_int,
+)
 from .._methods import result_path
 
 
@@ -31,24 +38,22 @@ from .._methods import result_path
 
 
 def add_experiment_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument(
-        "--levels",
-        type=float_list,
-        required=True,
+    add_levels(
+        p,
         help="V1,V2,V3,V4 with V1 < V2 < -D_M < 0 < D_M < V3 < V4 (--levels=-6,-3,3,6)",
     )
     p.add_argument("--order", type=positive_int, required=True, help="order n (A1)")
     p.add_argument(
         "--periods", type=positive_int, required=True, help="periods T = 7n of (5.1)"
     )
-    p.add_argument("--dt", type=positive_float, required=True, help="sampling period")
+    add_sampling_period(p, help="sampling period")
     p.add_argument(
         "--d-max",
         type=positive_float,
         default=None,
         help="the bound D_M of A4, to check (3.1) (optional)",
     )
-    p.add_argument("--out", type=Path, required=True, help="experiment folder")
+    add_experiment_folder(p)
 
 
 def experiment(args: argparse.Namespace) -> int:
@@ -100,7 +105,7 @@ def designed_input(design: dict) -> tuple[np.ndarray, np.ndarray]:
 
 
 def add_identify_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("dir", type=Path, help="experiment folder with data.csv")
+    add_data_folder(p)
     p.add_argument(
         "--structure",
         choices=STRUCTURES,

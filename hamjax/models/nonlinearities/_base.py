@@ -6,7 +6,7 @@ from typing import Any, TypeVar
 import equinox as eqx
 import jax.lax as lax
 import jax.numpy as jnp
-from jaxtyping import Array, Float, PyTree
+from jaxtyping import Array, ArrayLike, Float, PyTree
 
 from ..._types import Signal
 
@@ -24,6 +24,18 @@ class AbstractStaticNonlinearity(AbstractNonlinearity):
     @abc.abstractmethod
     def __call__(self, v: Float[Array, "*shape"]) -> Float[Array, "*shape"]:
         """Apply the map elementwise."""
+
+
+class AbstractBandNonlinearity(AbstractStaticNonlinearity):
+    """A static map set by a band `[lower, upper]` of the input (keyword-only,
+    stored as float arrays)."""
+
+    lower: Float[Array, ""]
+    upper: Float[Array, ""]
+
+    def __init__(self, *, lower: Float[ArrayLike, ""], upper: Float[ArrayLike, ""]):
+        self.lower = jnp.asarray(lower, dtype=float)
+        self.upper = jnp.asarray(upper, dtype=float)
 
 
 class AbstractHysteresisNonlinearity(AbstractNonlinearity):

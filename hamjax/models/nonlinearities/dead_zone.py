@@ -4,10 +4,10 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
 from ..._checks import concrete
-from ._base import AbstractStaticNonlinearity
+from ._base import AbstractBandNonlinearity
 
 
-class DeadZone(AbstractStaticNonlinearity):
+class DeadZone(AbstractBandNonlinearity):
     """$F(v) = v - \\text{upper}$ above `upper`, $v - \\text{lower}$ below `lower`,
     and $0$ in between (`lower <= 0 <= upper`; unit slopes).
 
@@ -16,13 +16,6 @@ class DeadZone(AbstractStaticNonlinearity):
     Array([-1. ,  0. ,  0.5], dtype=float64)
     ```
     """
-
-    lower: Float[Array, ""]
-    upper: Float[Array, ""]
-
-    def __init__(self, *, lower: Float[ArrayLike, ""], upper: Float[ArrayLike, ""]):
-        self.lower = jnp.asarray(lower, dtype=float)
-        self.upper = jnp.asarray(upper, dtype=float)
 
     @classmethod
     def symmetric(cls, width: Float[ArrayLike, ""]) -> "DeadZone":

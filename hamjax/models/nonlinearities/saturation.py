@@ -1,13 +1,13 @@
 """Saturation: the input clipped to [lower, upper]."""
 
 import jax.numpy as jnp
-from jaxtyping import Array, ArrayLike, Float
+from jaxtyping import Array, Float
 
 from ..._checks import concrete
-from ._base import AbstractStaticNonlinearity
+from ._base import AbstractBandNonlinearity
 
 
-class Saturation(AbstractStaticNonlinearity):
+class Saturation(AbstractBandNonlinearity):
     """$F(v) = \\min(\\max(v, \\text{lower}), \\text{upper})$.
 
     ```python
@@ -15,13 +15,6 @@ class Saturation(AbstractStaticNonlinearity):
     Array([-1. ,  0.5,  2. ], dtype=float64)
     ```
     """
-
-    lower: Float[Array, ""]
-    upper: Float[Array, ""]
-
-    def __init__(self, *, lower: Float[ArrayLike, ""], upper: Float[ArrayLike, ""]):
-        self.lower = jnp.asarray(lower, dtype=float)
-        self.upper = jnp.asarray(upper, dtype=float)
 
     def __check_init__(self):
         lo, up = concrete(self.lower), concrete(self.upper)

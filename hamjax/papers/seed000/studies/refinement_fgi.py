@@ -48,7 +48,7 @@ from ....signals import (
     nbbi_staircase,
 )
 from ....simulation import simulate
-from ..._refinement import REFINEMENT_OPTIONS, refinement_options
+from ... import _refinement as shared
 from ..border_shapes import cycle_points
 from ..plants import seed000_plant
 
@@ -85,7 +85,7 @@ OPTIONS = (
     StudyOption(
         "periods", [2, 8, 32], "averaged periods M (comma-separated)", _int_list
     ),
-    StudyOption("snrs", [20.0, 40.0], "SNRs in dB (comma-separated)", float_list),
+    shared.snrs_option([20.0, 40.0]),
     StudyOption("noises", None, "output noise stds (replace --snrs)", float_list),
     StudyOption("hold", 20.0, "NBBI hold N*Tr (s) per level", positive_float),
     StudyOption("dt", 0.02, "sampling period (s)", positive_float),
@@ -95,7 +95,7 @@ OPTIONS = (
         "fraction of each NBBI hold left out of the refinement as transient",
         _fraction,
     ),
-    *REFINEMENT_OPTIONS,
+    *shared.REFINEMENT_OPTIONS,
 )
 
 
@@ -191,18 +191,7 @@ class _Trial(eqx.Module):
     options: RefinementOptions
 
     def __call__(self, key):
-        out = {
-            k: []
-            for k in (
-                "closed",
-                "settled",
-                "refined",
-                "ok_closed",
-                "ok_settled",
-                "ok_refined",
-                "steps",
-            )
-        }
+        rows = []
         for i, d in enumerate(self.designs):
             for j in range(self.sigmas.shape[0]):
                 nbbi_key, fgi_key = jr.split(jr.fold_in(key, 100 * i + j))
@@ -216,14 +205,18 @@ class _Trial(eqx.Module):
                 y = p.select(y_nbbi, y_fgi)
                 start = p.initial_theta(y_nbbi, y_fgi)
                 r = refine(p, start, y, y, options=self.options, throw=False)
-                out["closed"].append(cf)
-                out["settled"].append(cs)
-                out["refined"].append(r.estimate)
-                out["ok_closed"].append(ok_c)
-                out["ok_settled"].append(ok_s)
-                out["ok_refined"].append(r.result._value == 0)
-                out["steps"].append(r.steps)
-        return {k: jnp.stack(x) for k, x in out.items()}
+                rows.append(
+                    {
+                        "closed": cf,
+                        "settled": cs,
+                        "refined": r.estimate,
+                        "ok_closed": ok_c,
+                        "ok_settled": ok_s,
+                        "ok_refined": r.result._value == 0,
+                        "steps": r.steps,
+                    }
+                )
+        return shared.stack_rows(rows)
 
 
 def _fundamental_error(p, estimates, truth):
@@ -272,7 +265,7 @@ def run(key, *, realisations: int, chunk: int, out: Path, quiet: bool, args) -> 
     from ....plotting.refinement import save_refinement_study
 
     opts = option_values(args, OPTIONS)
-    options = refinement_options(opts)
+    options = shared.refinement_options(opts)
     plant, levels, _, _ = seed000_plant()
     designs = [
         make_design(
@@ -322,7 +315,7 @@ def run(key, *, realisations: int, chunk: int, out: Path, quiet: bool, args) -> 
 
     t_cf = t_ref = float("nan")
     if opts.timing:
-        keys = jax.vmap(lambda r: jr.fold_in(jr.key(1), r))(jnp.arange(min(chunk, 8)))
+        keys = shared.timing_keys(chunk, 8)
         t_cf = time_per_call(_closed, keys)
         t_ref = time_per_call(_full, keys)
 

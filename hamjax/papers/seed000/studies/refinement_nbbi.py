@@ -33,10 +33,9 @@ from ....refinement import (
     refine,
 )
 from ....refinement.backlash_start import initial_backlash_theta
-from ....refinement.efficiency import efficiency_summary
 from ....signals import initialisation_step, nbbi_staircase
 from ....simulation import simulate
-from ..._refinement import REFINEMENT_OPTIONS, refinement_options
+from ... import _refinement as shared
 from ..plants import seed000_plant
 
 
@@ -53,9 +52,9 @@ OPTIONS = (
     StudyOption(
         "holds", [5.0, 10.0, 20.0, 40.0], "hold N*Tr (s) per level", float_list
     ),
-    StudyOption("snrs", [20.0, 40.0], "SNRs in dB (comma-separated)", float_list),
+    shared.snrs_option([20.0, 40.0]),
     StudyOption("dt", 0.05, "sampling period (s)", positive_float),
-    *REFINEMENT_OPTIONS,
+    *shared.REFINEMENT_OPTIONS,
 )
 
 
@@ -89,7 +88,7 @@ class _Trial(eqx.Module):
     options: RefinementOptions
 
     def __call__(self, key):
-        out = {k: [] for k in ("closed", "refined", "ok_closed", "ok_refined", "steps")}
+        rows = []
         for i, (v, w, p) in enumerate(self.records):
             for j in range(self.sigmas.shape[1]):
                 noise = self.sigmas[i, j] * jr.normal(
@@ -108,12 +107,16 @@ class _Trial(eqx.Module):
                     throw=False,
                 )
                 nan = jnp.full(r.estimate.shape[0] - cf.shape[0], jnp.nan)
-                out["closed"].append(jnp.concatenate([cf, nan]))
-                out["refined"].append(r.estimate)
-                out["ok_closed"].append(cf_ok)
-                out["ok_refined"].append(r.result._value == 0)
-                out["steps"].append(r.steps)
-        return {k: jnp.stack(x) for k, x in out.items()}
+                rows.append(
+                    {
+                        "closed": jnp.concatenate([cf, nan]),
+                        "refined": r.estimate,
+                        "ok_closed": cf_ok,
+                        "ok_refined": r.result._value == 0,
+                        "steps": r.steps,
+                    }
+                )
+        return shared.stack_rows(rows)
 
 
 def _closed_form(y, levels, hold, dt, start):
@@ -130,7 +133,7 @@ def run(key, *, realisations: int, chunk: int, out: Path, quiet: bool, args) -> 
 
     opts = option_values(args, OPTIONS)
     holds, snrs, dt = opts.holds, opts.snrs, opts.dt
-    options = refinement_options(opts)
+    options = shared.refinement_options(opts)
     plant, levels, _, _ = seed000_plant()
     records, sigmas, crlb, truths, starts = [], [], [], [], []
     for hold in holds:
@@ -158,7 +161,7 @@ def run(key, *, realisations: int, chunk: int, out: Path, quiet: bool, args) -> 
     )
     v, w, p = records[-1]
     lv = tuple(float(x) for x in levels)
-    keys = jax.vmap(lambda r: jr.fold_in(jr.key(1), r))(jnp.arange(min(chunk, 32)))
+    keys = shared.timing_keys(chunk, 32)
     noisy = lambda k: w + sigmas[-1][0] * jr.normal(k, w.shape)
 
     def _full(k):
@@ -179,23 +182,13 @@ def run(key, *, realisations: int, chunk: int, out: Path, quiet: bool, args) -> 
     k = 0
     for i, hold in enumerate(holds):
         for j, snr in enumerate(snrs):
-            ok_r = np.asarray(res["ok_refined"][:, k])
-            ok_c = np.asarray(res["ok_closed"][:, k])
             configs.append(
                 {
                     "hold_s": hold,
                     "samples": int(records[i][0].shape[0]),
                     "snr_db": snr,
                     "noise_std": sigmas[i][j],
-                    "closed_form": efficiency_summary(
-                        res["closed"][:, k], truths[i], crlb[i][j], ok_c
-                    ),
-                    "refined": efficiency_summary(
-                        res["refined"][:, k], truths[i], crlb[i][j], ok_r
-                    ),
-                    "refined_failure_rate": float(1 - ok_r.mean()),
-                    "closed_form_failure_rate": float(1 - ok_c.mean()),
-                    "mean_steps": float(np.asarray(res["steps"][:, k]).mean()),
+                    **shared.refinement_columns(res, k, truths[i], crlb[i][j]),
                 }
             )
             k += 1

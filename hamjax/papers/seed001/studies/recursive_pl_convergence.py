@@ -10,14 +10,13 @@ to each tolerance, the final errors of $\\Theta$, $b$, $F(V_j)$, $K$, $D$, $L$
 (rule (3.18a) or (3.18b) as the map is), and the excitation level of one period.
 """
 
-import json
 from pathlib import Path
 
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from ...._argtypes import int_list, positive_int
+from ...._argtypes import int_list
 from ....identification.seed001 import (
     excitation_level,
     normalised_gradient_convergence,
@@ -25,10 +24,9 @@ from ....identification.seed001 import (
     regressor,
 )
 from ....montecarlo.registry import StudyOption, option_values
-from ....montecarlo.storage import atomic_write_bytes
 from ....simulation import simulate
-from ..._study import run_realisations
 from ..plants import pe_input, random_dead_zone_or_preload
+from ._common import headless, periods_option, run_trials, write_summary
 
 
 NAME = "recursive-pl-convergence"
@@ -98,11 +96,8 @@ class ConvergenceTrial(eqx.Module):
 
 
 OPTIONS = (
-    StudyOption(
-        "periods",
-        1500,
-        "periods of (5.1) per realisation (7n samples each; default 1500)",
-        positive_int,
+    periods_option(
+        1500, "periods of (5.1) per realisation (7n samples each; default 1500)"
     ),
     StudyOption("orders", [1, 2, 3], "orders n to test (default 1,2,3)", int_list),
 )
@@ -110,29 +105,25 @@ OPTIONS = (
 
 def run(key, *, realisations: int, chunk: int, out: Path, quiet: bool, args) -> dict:
     import jax.random as jr
-    import matplotlib
 
-    matplotlib.use("Agg")
+    headless()
     from ....plotting.recursive_pl import plot_histogram, plot_scatter
 
     opts = option_values(args, OPTIONS)
     periods, orders = opts.periods, opts.orders
     out = Path(out)
     per_order, samples, excitation = {}, {}, {}
+    budget = dict(realisations=realisations, chunk=chunk, quiet=quiet)
     for n in orders:
-        res = run_realisations(
+        res = run_trials(
             jr.fold_in(key, n),
             ConvergenceTrial(order=n, periods=periods),
-            name=f"{NAME}-n{n}",
-            realisations=realisations,
-            chunk=chunk,
-            out=out / f"realisations_n{n}",
-            quiet=quiet,
-            metadata={
-                "seed": getattr(args, "seed", None),
-                "periods": periods,
-                "order": n,
-            },
+            f"{NAME}-n{n}",
+            out / f"realisations_n{n}",
+            args,
+            budget,
+            periods=periods,
+            order=n,
         )
         n_time = 7 * n * periods
         s = np.asarray(res["samples_to_tol"], dtype=float)
@@ -212,8 +203,4 @@ def run(key, *, realisations: int, chunk: int, out: Path, quiet: bool, args) -> 
             "correlations in per_order)."
         ),
     }
-    summary["headline"] = summary["verdict"]
-    atomic_write_bytes(
-        out / "summary.json", (json.dumps(summary, indent=2) + "\n").encode()
-    )
-    return summary
+    return write_summary(out, summary)

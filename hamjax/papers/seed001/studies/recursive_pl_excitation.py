@@ -11,7 +11,6 @@ spacing 1 instead of $n$ (period 7); and an i.i.d. random input on
 $\\{0, V_1..V_4\\}$ over the same number of samples.
 """
 
-import json
 from pathlib import Path
 
 import equinox as eqx
@@ -22,10 +21,9 @@ import numpy as np
 from ...._argtypes import int_list
 from ....identification.seed001 import excitation_level, regressor
 from ....montecarlo.registry import StudyOption, option_values
-from ....montecarlo.storage import atomic_write_bytes
 from ....simulation import simulate
-from ..._study import run_realisations
 from ..plants import pe_input, random_case
+from ._common import headless, run_trials, write_summary
 
 
 NAME = "recursive-pl-excitation"
@@ -70,24 +68,22 @@ OPTIONS = (
 
 
 def run(key, *, realisations: int, chunk: int, out: Path, quiet: bool, args) -> dict:
-    import matplotlib
-
-    matplotlib.use("Agg")
+    headless()
     from ....plotting.recursive_pl import plot_curves
 
     orders = option_values(args, OPTIONS).orders
     out = Path(out)
     per_order = {}
+    budget = dict(realisations=realisations, chunk=chunk, quiet=quiet)
     for n in orders:
-        res = run_realisations(
+        res = run_trials(
             jr.fold_in(key, n),
             ExcitationTrial(order=n),
-            name=f"{NAME}-n{n}",
-            realisations=realisations,
-            chunk=chunk,
-            out=out / f"realisations_n{n}",
-            quiet=quiet,
-            metadata={"seed": getattr(args, "seed", None), "order": n},
+            f"{NAME}-n{n}",
+            out / f"realisations_n{n}",
+            args,
+            budget,
+            order=n,
         )
         per_order[n] = {
             name: {
@@ -132,8 +128,4 @@ def run(key, *, realisations: int, chunk: int, out: Path, quiet: bool, args) -> 
             + " (impulses closer than n samples apart: the lagged blocks of Phi overlap)."
         ),
     }
-    summary["headline"] = summary["verdict"]
-    atomic_write_bytes(
-        out / "summary.json", (json.dumps(summary, indent=2) + "\n").encode()
-    )
-    return summary
+    return write_summary(out, summary)

@@ -13,7 +13,6 @@ Each realisation draws one white sequence $e$ and uses $z = \\sigma_k e$ for eve
 SNR; the gradient (4.1) and batch least squares are read at three record lengths.
 """
 
-import json
 from pathlib import Path
 
 import equinox as eqx
@@ -23,19 +22,16 @@ import jax.numpy as jnp
 import jax.random as jr
 import numpy as np
 
-from ...._argtypes import positive_int
 from ....identification.seed001 import (
     gradient_step,
     recover_parameters,
     regressor,
 )
 from ....models import PiecewiseLinear
-from ....montecarlo.registry import StudyOption, option_values
+from ....montecarlo.registry import option_values
 from ....montecarlo.statistics import loglog_slope
-from ....montecarlo.storage import atomic_write_bytes
-from ....simulation import simulate
-from ..._study import run_realisations
-from ..plants import RecursivePLCase, paper_case, pe_input
+from ..plants import RecursivePLCase, paper_case
+from ._common import clean_record, headless, periods_option, run_trials, write_summary
 
 
 NAME = "recursive-pl-noise"
@@ -125,40 +121,51 @@ def asymptotic_ls_bias(phi_w, a, std):
 
 
 OPTIONS = (
-    StudyOption(
-        "periods",
-        2000,
-        "longest record, in periods T = 14 (default 2000); also read at 1/16, 1/4",
-        positive_int,
+    periods_option(
+        2000, "longest record, in periods T = 14 (default 2000); also read at 1/16, 1/4"
+    ),
+)
+
+# The figures against the record length T: (file, ((label, row field), ...) with
+# one curve per SNR, ylabel, title).
+_FIGURES_VS_T = (
+    (
+        "floor_vs_T.png",
+        (
+            ("gradient {:g} dB", "gradient_floor_mean"),
+            ("LS |bias| {:g} dB", "batch_bias_norm"),
+        ),
+        "||theta - theta*||",
+        "noisy case: gradient mean error over [T/2,T] and LS bias vs T",
+    ),
+    (
+        "std_vs_T.png",
+        (
+            ("LS std {:g} dB", "batch_std_norm"),
+            ("gradient std {:g} dB", "gradient_std_norm"),
+        ),
+        "std (sqrt trace)",
+        "noisy case: spread across realisations vs T",
     ),
 )
 
 
 def run(key, *, realisations: int, chunk: int, out: Path, quiet: bool, args) -> dict:
-    import matplotlib
-
-    matplotlib.use("Agg")
+    headless()
     from ....plotting.recursive_pl import plot_curves
 
     periods = option_values(args, OPTIONS).periods
     out = Path(out)
     case = study_case()
-    v = pe_input(case.levels, 2, periods)
-    w = simulate(case.plant(), v)
+    v, w = clean_record(case, periods)
     signal_rms = float(jnp.sqrt(jnp.mean(w**2)))
     stds = np.array([signal_rms * 10 ** (-snr / 20) for snr in SNRS_DB])
     n_time = v.shape[0]
     checkpoints = tuple(int(n_time // k) for k in (16, 4, 1))
     trial = NoiseTrial(case, v, w, jnp.asarray(stds), checkpoints)
-    res = run_realisations(
-        key,
-        trial,
-        name=NAME,
-        realisations=realisations,
-        chunk=chunk,
-        out=out / "realisations",
-        quiet=quiet,
-        metadata={"seed": getattr(args, "seed", None), "periods": periods},
+    budget = dict(realisations=realisations, chunk=chunk, quiet=quiet)
+    res = run_trials(
+        key, trial, NAME, out / "realisations", args, budget, periods=periods
     )
     theta_star = np.asarray(case.theta_star())
     a = np.asarray(case.a)
@@ -204,37 +211,15 @@ def run(key, *, realisations: int, chunk: int, out: Path, quiet: bool, args) -> 
     # Figures: floor vs T per SNR; LS bias and std vs T.
     x = np.array(checkpoints)
     rows = {(r["snr_db"], r["samples"]): r for r in table}
-    curves = {
-        f"gradient {s:g} dB": [rows[s, t]["gradient_floor_mean"] for t in x]
-        for s in SNRS_DB
-    }
-    curves |= {
-        f"LS |bias| {s:g} dB": [rows[s, t]["batch_bias_norm"] for t in x]
-        for s in SNRS_DB
-    }
-    plot_curves(
-        x,
-        curves,
-        xlabel="samples T",
-        ylabel="||theta - theta*||",
-        title="noisy case: gradient mean error over [T/2,T] and LS bias vs T",
-        logx=True,
-    ).savefig(out / "floor_vs_T.png", dpi=120)
-    curves = {
-        f"LS std {s:g} dB": [rows[s, t]["batch_std_norm"] for t in x] for s in SNRS_DB
-    }
-    curves |= {
-        f"gradient std {s:g} dB": [rows[s, t]["gradient_std_norm"] for t in x]
-        for s in SNRS_DB
-    }
-    plot_curves(
-        x,
-        curves,
-        xlabel="samples T",
-        ylabel="std (sqrt trace)",
-        title="noisy case: spread across realisations vs T",
-        logx=True,
-    ).savefig(out / "std_vs_T.png", dpi=120)
+    for file, series, ylabel, title in _FIGURES_VS_T:
+        curves = {
+            label.format(s): [rows[s, t][field] for t in x]
+            for label, field in series
+            for s in SNRS_DB
+        }
+        plot_curves(
+            x, curves, xlabel="samples T", ylabel=ylabel, title=title, logx=True
+        ).savefig(out / file, dpi=120)
     plot_curves(
         np.array(SNRS_DB),
         {
@@ -298,8 +283,4 @@ def run(key, *, realisations: int, chunk: int, out: Path, quiet: bool, args) -> 
         + ", ".join(f"{k}: {v:.2f}" for k, v in bias_ratio.items())
         + ")."
     )
-    summary["headline"] = summary["verdict"]
-    atomic_write_bytes(
-        out / "summary.json", (json.dumps(summary, indent=2) + "\n").encode()
-    )
-    return summary
+    return write_summary(out, summary)

@@ -9,7 +9,6 @@ estimates are $0$ and $\\Theta^* + s \\|\\Theta^*\\| u$ for several $s$; the rad
 multiples of $\\|\\Theta^*\\|$ and $10^6$.
 """
 
-import json
 from pathlib import Path
 
 import equinox as eqx
@@ -18,13 +17,10 @@ import jax.numpy as jnp
 import jax.random as jr
 import numpy as np
 
-from ...._argtypes import positive_int
 from ....identification.seed001 import normalised_gradient_convergence, regressor
-from ....montecarlo.registry import StudyOption, option_values
-from ....montecarlo.storage import atomic_write_bytes
-from ....simulation import simulate
-from ..._study import run_realisations
-from ..plants import paper_case, pe_input
+from ....montecarlo.registry import option_values
+from ..plants import paper_case
+from ._common import clean_record, headless, periods_option, run_trials, write_summary
 
 
 NAME = "recursive-pl-tuning"
@@ -73,27 +69,17 @@ class TuningTrial(eqx.Module):
         return {"samples_to_tol": samples, "final_error": final}
 
 
-OPTIONS = (
-    StudyOption(
-        "periods",
-        2000,
-        "periods of (5.1) (14 samples each; default 2000)",
-        positive_int,
-    ),
-)
+OPTIONS = (periods_option(2000, "periods of (5.1) (14 samples each; default 2000)"),)
 
 
 def run(key, *, realisations: int, chunk: int, out: Path, quiet: bool, args) -> dict:
-    import matplotlib
-
-    matplotlib.use("Agg")
+    headless()
     from ....plotting.recursive_pl import plot_curves
 
     periods = option_values(args, OPTIONS).periods
     out = Path(out)
     case = paper_case()
-    v = pe_input(case.levels, 2, periods)
-    y = simulate(case.plant(), v)
+    v, y = clean_record(case, periods)
     phi = regressor(v, y, levels=case.levels, order=2)
     theta_star = case.theta_star()
     size = float(jnp.linalg.norm(theta_star))
@@ -107,15 +93,9 @@ def run(key, *, realisations: int, chunk: int, out: Path, quiet: bool, args) -> 
         jnp.asarray(scales),
         jnp.array([s is None for s in START_SCALES]),
     )
-    res = run_realisations(
-        key,
-        trial,
-        name=NAME,
-        realisations=realisations,
-        chunk=chunk,
-        out=out / "realisations",
-        quiet=quiet,
-        metadata={"seed": getattr(args, "seed", None), "periods": periods},
+    budget = dict(realisations=realisations, chunk=chunk, quiet=quiet)
+    res = run_trials(
+        key, trial, NAME, out / "realisations", args, budget, periods=periods
     )
     n_time = y.shape[0]
     samples = np.asarray(res["samples_to_tol"], dtype=float)  # (R, rho, start, tol)
@@ -180,8 +160,4 @@ def run(key, *, realisations: int, chunk: int, out: Path, quiet: bool, args) -> 
             else "."
         )
     )
-    summary["headline"] = summary["verdict"]
-    atomic_write_bytes(
-        out / "summary.json", (json.dumps(summary, indent=2) + "\n").encode()
-    )
-    return summary
+    return write_summary(out, summary)

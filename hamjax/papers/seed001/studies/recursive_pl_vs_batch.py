@@ -8,7 +8,6 @@ as wall time per realisation of each estimator alone (compiled, vmapped chunk)
 and counted in floating-point operations.
 """
 
-import json
 from pathlib import Path
 
 import equinox as eqx
@@ -17,7 +16,6 @@ import jax.numpy as jnp
 import jax.random as jr
 import numpy as np
 
-from ...._argtypes import positive_int
 from ....identification.seed001 import (
     batch_least_squares,
     normalised_gradient_convergence,
@@ -25,11 +23,9 @@ from ....identification.seed001 import (
 )
 from ....montecarlo.registry import StudyOption, option_values
 from ....montecarlo.statistics import summarise
-from ....montecarlo.storage import atomic_write_bytes
 from ....montecarlo.timing import time_per_call
-from ....simulation import simulate
-from ..._study import run_realisations
-from ..plants import paper_case, pe_input
+from ..plants import paper_case
+from ._common import clean_record, headless, periods_option, run_trials, write_summary
 
 
 NAME = "recursive-pl-vs-batch"
@@ -72,20 +68,13 @@ class CompareTrial(eqx.Module):
 
 
 OPTIONS = (
-    StudyOption(
-        "periods",
-        2000,
-        "periods of (5.1) (14 samples each; default 2000)",
-        positive_int,
-    ),
+    periods_option(2000, "periods of (5.1) (14 samples each; default 2000)"),
     StudyOption("snr", 20.0, "output SNR in dB (default 20)", float),
 )
 
 
 def run(key, *, realisations: int, chunk: int, out: Path, quiet: bool, args) -> dict:
-    import matplotlib
-
-    matplotlib.use("Agg")
+    headless()
     import matplotlib.pyplot as plt
 
     from ....plotting.recursive_pl import theta_labels
@@ -94,20 +83,13 @@ def run(key, *, realisations: int, chunk: int, out: Path, quiet: bool, args) -> 
     periods, snr = opts.periods, opts.snr
     out = Path(out)
     case = paper_case()
-    v = pe_input(case.levels, 2, periods)
-    w = simulate(case.plant(), v)
+    v, w = clean_record(case, periods)
     std = float(jnp.sqrt(jnp.mean(w**2))) * 10 ** (-snr / 20)
     theta_star = case.theta_star()
     trial = CompareTrial(v, w, jnp.asarray(std), theta_star)
-    res = run_realisations(
-        key,
-        trial,
-        name=NAME,
-        realisations=realisations,
-        chunk=chunk,
-        out=out / "realisations",
-        quiet=quiet,
-        metadata={"seed": getattr(args, "seed", None), "periods": periods, "snr": snr},
+    budget = dict(realisations=realisations, chunk=chunk, quiet=quiet)
+    res = run_trials(
+        key, trial, NAME, out / "realisations", args, budget, periods=periods, snr=snr
     )
     stats = {name: summarise(res[name], np.asarray(theta_star)) for name in res}
     keys = jax.vmap(lambda r: jr.fold_in(key, r))(jnp.arange(min(chunk, realisations)))
@@ -169,8 +151,4 @@ def run(key, *, realisations: int, chunk: int, out: Path, quiet: bool, args) -> 
             "O(N p^2) and needs the whole record."
         ),
     }
-    summary["headline"] = summary["verdict"]
-    atomic_write_bytes(
-        out / "summary.json", (json.dumps(summary, indent=2) + "\n").encode()
-    )
-    return summary
+    return write_summary(out, summary)

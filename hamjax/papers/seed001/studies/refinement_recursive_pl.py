@@ -18,12 +18,11 @@ intermediate step is needed. Parameters $(a, b, F(V_j))$ in the normalisation
 from pathlib import Path
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 import jax.random as jr
 import numpy as np
 
-from ...._argtypes import float_list, int_list
+from ...._argtypes import int_list
 from ...._results import RESULTS
 from ....identification.seed001 import (
     batch_least_squares,
@@ -45,7 +44,7 @@ from ....refinement.efficiency import efficiency_summary
 from ....refinement.steiglitz_mcbride import steiglitz_mcbride_table
 from ....signals import pe_impulse_sequence
 from ....simulation import simulate
-from ..._refinement import REFINEMENT_OPTIONS, refinement_options
+from ... import _refinement as shared
 from ..plants import seed001_plant
 
 
@@ -62,8 +61,8 @@ OPTIONS = (
     StudyOption(
         "periods", [10, 30, 100, 300], "record lengths in periods of 7n", int_list
     ),
-    StudyOption("snrs", [10.0, 20.0], "SNRs in dB (comma-separated)", float_list),
-    *REFINEMENT_OPTIONS,
+    shared.snrs_option([10.0, 20.0]),
+    *shared.REFINEMENT_OPTIONS,
 )
 
 
@@ -92,19 +91,7 @@ class _Trial(eqx.Module):
     options: RefinementOptions
 
     def __call__(self, key):
-        out = {
-            k: []
-            for k in (
-                "closed",
-                "sm",
-                "refined",
-                "direct",
-                "ok_closed",
-                "ok_refined",
-                "ok_direct",
-                "steps",
-            )
-        }
+        rows = []
         levels = jnp.asarray(self.levels)
         for i, (v, w, sigmas) in enumerate(self.records):
             for j in range(sigmas.shape[0]):
@@ -116,15 +103,19 @@ class _Trial(eqx.Module):
                 sm = steiglitz_mcbride_table(v, y, levels, cf_safe[: self.order])
                 r = _refined(v, y, self.levels, sm, self.options)
                 direct = _refined(v, y, self.levels, cf_safe, self.options)
-                out["closed"].append(cf)
-                out["sm"].append(sm)
-                out["refined"].append(r.estimate)
-                out["direct"].append(direct.estimate)
-                out["ok_closed"].append(cf_ok)
-                out["ok_refined"].append(r.result._value == 0)
-                out["ok_direct"].append(cf_ok & (direct.result._value == 0))
-                out["steps"].append(r.steps)
-        return {k: jnp.stack(x) for k, x in out.items()}
+                rows.append(
+                    {
+                        "closed": cf,
+                        "sm": sm,
+                        "refined": r.estimate,
+                        "direct": direct.estimate,
+                        "ok_closed": cf_ok,
+                        "ok_refined": r.result._value == 0,
+                        "ok_direct": cf_ok & (direct.result._value == 0),
+                        "steps": r.steps,
+                    }
+                )
+        return shared.stack_rows(rows)
 
 
 def run(key, *, realisations: int, chunk: int, out: Path, quiet: bool, args) -> dict:
@@ -133,7 +124,7 @@ def run(key, *, realisations: int, chunk: int, out: Path, quiet: bool, args) -> 
 
     opts = option_values(args, OPTIONS)
     periods, snrs = opts.periods, opts.snrs
-    options = refinement_options(opts)
+    options = shared.refinement_options(opts)
     plant, levels, n = seed001_plant()
     truth_p = ImpulseTableParametrisation(levels, jnp.array([1.0, -2.0]))
     theta_true = truth_p.from_physical(
@@ -168,7 +159,7 @@ def run(key, *, realisations: int, chunk: int, out: Path, quiet: bool, args) -> 
     )
     # Cost: time per estimate of each estimator alone, on the longest record.
     v, w, sigmas = records[-1]
-    keys = jax.vmap(lambda r: jr.fold_in(jr.key(1), r))(jnp.arange(min(chunk, 64)))
+    keys = shared.timing_keys(chunk, 64)
     noisy = lambda k: w + sigmas[0] * jr.normal(k, w.shape)
     lv = jnp.asarray(levels)
 
@@ -188,7 +179,6 @@ def run(key, *, realisations: int, chunk: int, out: Path, quiet: bool, args) -> 
     k = 0
     for i, P in enumerate(periods):
         for j, snr in enumerate(snrs):
-            ok_r = np.asarray(res["ok_refined"][:, k])
             ok_c = np.asarray(res["ok_closed"][:, k])
             configs.append(
                 {
@@ -196,12 +186,7 @@ def run(key, *, realisations: int, chunk: int, out: Path, quiet: bool, args) -> 
                     "samples": int(records[i][0].shape[0]),
                     "snr_db": snr,
                     "noise_std": float(records[i][2][j]),
-                    "closed_form": efficiency_summary(
-                        res["closed"][:, k], truth, crlb[i][j], ok_c
-                    ),
-                    "refined": efficiency_summary(
-                        res["refined"][:, k], truth, crlb[i][j], ok_r
-                    ),
+                    **shared.refinement_columns(res, k, truth, crlb[i][j]),
                     "steiglitz_mcbride": efficiency_summary(
                         res["sm"][:, k], truth, crlb[i][j], ok_c
                     ),
@@ -214,9 +199,6 @@ def run(key, *, realisations: int, chunk: int, out: Path, quiet: bool, args) -> 
                     "refined_from_closed_form_failure_rate": float(
                         1 - np.asarray(res["ok_direct"][:, k]).mean()
                     ),
-                    "refined_failure_rate": float(1 - ok_r.mean()),
-                    "closed_form_failure_rate": float(1 - ok_c.mean()),
-                    "mean_steps": float(np.asarray(res["steps"][:, k]).mean()),
                 }
             )
             k += 1

@@ -58,7 +58,7 @@ HAMJAX = {
         "hamjax-public-batch",
         "hamjax-engine",
     ),
-    # For workload 2 the public API (vmap of recursive_pl.normalised_gradient) is the
+    # For workload 2 the public API (vmap of seed001.normalised_gradient) is the
     # vmap-of-scan form; the public batch is seed001.normalised_gradient_batch.
     2: (
         "hamjax-time-major",

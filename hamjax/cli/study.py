@@ -168,7 +168,8 @@ def run_study(study, args: argparse.Namespace) -> int:
 
 
 def study_main(name: str, argv: list[str] | None = None) -> int:
-    """Run the study `name` from a script or a test with the options of\n    `hamjax study NAME` (`argv` without the name); 2 on a user error."""
+    """Run the study `name` from a script or a test with the options of
+    `hamjax study NAME` (`argv` without the name); 2 on a user error."""
     import matplotlib
 
     from ..montecarlo.registry import get_study

@@ -18,8 +18,8 @@ def run(key, out: Path) -> list[tuple[str, str]]:
 
     # Seed 000, Fig. 6: normalised plant, initialisation (3) + staircase (4a-b).
     plant, levels, dt, hold = seed000_plant()
-    t0, v0 = signals.initialisation_step(levels, duration=hold / 4, dt=dt)
-    t1, v1 = signals.nbbi_staircase(levels, hold=hold, dt=dt)
+    _, v0 = signals.initialisation_step(levels, duration=hold / 4, dt=dt)
+    _, v1 = signals.nbbi_staircase(levels, hold=hold, dt=dt)
     v = jnp.concatenate([v0, v1])
     t = jnp.arange(v.shape[0]) * dt
     w = simulation.simulate(plant, v, dt=dt)

@@ -107,9 +107,10 @@ def _result(prep, att: Attribution, val: dict) -> GapDiagnosis:
         att.noise_floor,
         prep.ctx.dt,
     )
-    mse = {"none": att.gap_before**2}
-    for c in ranking:
-        mse[c["effect"]] = min(mse.get(c["effect"], np.inf), c["gap_after"] ** 2)
+    # each class is tried once: its validation mean-square error
+    mse = {"none": att.gap_before**2} | {
+        c.effect: c.gap_after**2 for c in att.candidates
+    }
     return GapDiagnosis(
         effect=att.effect,
         probabilities=probabilities(att.effect, mse, len(val["y"]), att.shrink),

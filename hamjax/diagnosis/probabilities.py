@@ -50,7 +50,6 @@ CLASSES = (
     "feedback_nonlinearity",
     "unexplained",
 )
-NOISE = NOISE_NAMES
 # Fitted on family A (module docstring): slope of the log-likelihood-ratio term,
 # then the offsets for none, parameter_mismatch, structural, noise verdicts.
 ALPHA = 0.35366278
@@ -62,7 +61,7 @@ TEMPERATURE = 3000.0
 def _kind_offset(effect: str) -> float:
     if effect in BETA:
         return BETA[effect]
-    return BETA_NOISE if effect in NOISE else BETA_STRUCTURAL
+    return BETA_NOISE if effect in NOISE_NAMES else BETA_STRUCTURAL
 
 
 def named_confidence(effect: str, mse: dict[str, float], n: int) -> float:
@@ -97,7 +96,7 @@ def probabilities(
         weights = weights / weights.sum()
         for k, w in zip(rivals, weights, strict=True):
             out[k] = rest * (1.0 - unexplained) * float(w)
-        out["unexplained"] = out.get("unexplained", 0.0) + rest * unexplained
+        out["unexplained"] += rest * unexplained
     else:
         out["unexplained"] += rest
     return _capped(out, effect, set(rivals) | {"unexplained"})

@@ -21,6 +21,7 @@ def theta_labels(order: int) -> list[str]:
 
 def plot_fig3a(t, history, theta_star, *, ax=None) -> Figure:
     """Fig. 3a analogue: every $\\hat\\Theta_k(t)$ with its true value (dashed)."""
+    own_figure = ax is None
     fig, ax = _axes(ax)
     history = np.asarray(history)
     theta_star = np.asarray(theta_star)
@@ -34,7 +35,8 @@ def plot_fig3a(t, history, theta_star, *, ax=None) -> Figure:
     ax.set_title("Recursive estimates of the parameter vector (true values dashed)")
     # Outside the axes: inside, any corner hides a curve or its target.
     ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5))
-    fig.set_size_inches(8.2, 4)
+    if own_figure:  # room for the legend beside the axes
+        fig.set_size_inches(8.2, 4)
     fig.tight_layout()
     return fig
 

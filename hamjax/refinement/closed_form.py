@@ -279,7 +279,7 @@ def refine_fgi_result(
     given = p.pack(np.asarray(cycle_values, dtype=float), starts)
     settled = p.initial_theta(y_nbbi, y_fgi)
     rss = [float(jnp.sum((y - p.predict(t, y)) ** 2)) for t in (given, settled)]
-    theta0 = settled if not rss[0] <= rss[1] else given
+    theta0 = given if rss[0] <= rss[1] else settled
     res = refine(p, theta0, y, y, options=options, throw=False)
     sigma = jnp.sqrt(p.replicate_noise_variance(y_nbbi, y_fgi))
     se = np.sqrt(np.diag(np.asarray(cramer_rao_bound(p, res.theta, y, sigma))))

@@ -254,10 +254,6 @@ class FGIFrequencyParametrisation(AbstractParametrisation):
             off += 2 * n
         return u, g
 
-    def frequency_response(self, theta: Params) -> list[Complex[Array, " k"]]:
-        """$G(jk\\omega)$ of each block, at its `harmonics`."""
-        return self._split(theta)[1]
-
     def predict(self, theta: Params, v: Signal) -> Signal:
         del v  # the design fixes where each fitted sample lies
         u, g = self._split(theta)

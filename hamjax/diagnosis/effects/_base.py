@@ -29,7 +29,7 @@ class AbstractEffect(eqx.Module):
       augmented model is then the nominal model exactly);
     - `positive`: slots whose physical value is $|raw|$ (widths, rates);
     - `unit_interval`: slots whose physical value is $0.995\,\sigma(raw)$, in
-      $[0, 1)$ (a pole), see `to_unit_interval`;
+      $[0, 1)$ (a pole), see `unit_raw` and `UNIT_MAX`;
     - `scales(ctx)`: the step of one unit of the fitted parameter, per slot;
     - `starts(ctx)`: starting values (multi-start under `vmap`), each a
       `{slot: value}` dict in physical units.

@@ -28,7 +28,7 @@ import jax.random as jr
 import numpy as np
 
 from ...diagnosis.attribute import DETERMINISTIC_NAMES, NOISE_NAMES
-from ...io import model_to_dict, read_json, write_case, write_json
+from ...io import model_to_dict, write_case, write_json
 from ...models import (
     ContinuousTransferFunction,
     DiscreteTransferFunction,
@@ -512,7 +512,7 @@ def calibration(confidences: list[float], right: list[bool], bins: int = 10) -> 
                     "accuracy": float(r[sel].mean()),
                 }
             )
-    return {"ece": float(ece) if c.size else float("nan"), "bins": table}
+    return {"ece": float(ece), "bins": table}
 
 
 def score(
@@ -551,12 +551,16 @@ def score(
             if gb > s:
                 shrink_values.append((gb - ga) / (gb - s))
     scored = [n for n in truth["cases"] if n in named and n in (confidences or {})]
-    calib = calibration(
-        [confidences[n] for n in scored],
-        [truth["cases"][n]["effect"] == named[n] for n in scored],
+    calib = (
+        calibration(
+            [confidences[n] for n in scored],
+            [truth["cases"][n]["effect"] == named[n] for n in scored],
+        )
+        if scored
+        else None
     )
     return {
-        "calibration": calib if scored else None,
+        "calibration": calib,
         "n_cases": total,
         "missing": missing,
         "accuracy": correct / total if total else float("nan"),
@@ -567,28 +571,6 @@ def score(
         else float("nan"),
         "confusion": matrix,
     }
-
-
-def score_folder(folder: Path, results: Path) -> dict:
-    """Score `results/<case>/diagnosis.json` against `folder/truth.json`."""
-    from ..._errors import UserInputError
-
-    truth_path = Path(folder) / "truth.json"
-    if not truth_path.is_file():
-        raise UserInputError(
-            f"{truth_path}: not found (is {folder} a blind-benchmark folder?)"
-        )
-    truth = read_json(truth_path)
-    named, shrinks, confidences = {}, {}, {}
-    for name in truth["cases"]:
-        p = Path(results) / name / "diagnosis.json"
-        if p.is_file():
-            r = read_json(p)
-            named[name] = r["effect"]
-            shrinks[name] = (r["gap_before"], r["gap_after"])
-            if isinstance(r.get("probabilities"), dict):
-                confidences[name] = float(r["probabilities"].get(r["effect"], 0.0))
-    return score(truth, named, shrinks, confidences)
 
 
 def format_score(s: dict) -> str:

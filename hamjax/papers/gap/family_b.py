@@ -32,8 +32,7 @@ from pathlib import Path
 import numpy as np
 from scipy import linalg, signal
 
-from ...io import write_json
-from .blind import write_case
+from ...io import write_case, write_json
 
 
 # The contract's names (shared/contracts/gap-case.md) that family B draws: the
@@ -61,16 +60,11 @@ NOMINAL_ERROR = (0.15, 0.20)  # relative error of each perturbed physical parame
 N_SAMPLES = (1000, 4000)
 
 # which plants can physically carry each cause
+# every plant of the family
+ALL_PLANTS = ("heater", "thermal2", "msd", "motor", "servo_gear", "valve_process")
 PLANTS_FOR = {
-    "none": ("heater", "thermal2", "msd", "motor", "servo_gear", "valve_process"),
-    "parameter_mismatch": (
-        "heater",
-        "thermal2",
-        "msd",
-        "motor",
-        "servo_gear",
-        "valve_process",
-    ),
+    "none": ALL_PLANTS,
+    "parameter_mismatch": ALL_PLANTS,
     "backlash": ("servo_gear", "valve_process"),
     "dead_zone": ("valve_process", "msd", "motor"),
     "saturation": ("heater", "thermal2", "motor", "msd"),
@@ -78,23 +72,9 @@ PLANTS_FOR = {
     "rate_limit": ("valve_process", "motor", "heater"),
     "time_delay": ("heater", "thermal2", "valve_process"),
     "extra_pole": ("heater", "thermal2", "msd", "motor", "valve_process"),
-    "output_nonlinearity": (
-        "heater",
-        "thermal2",
-        "msd",
-        "motor",
-        "servo_gear",
-        "valve_process",
-    ),
-    "drift": ("heater", "thermal2", "msd", "motor", "servo_gear", "valve_process"),
-    "coloured_noise": (
-        "heater",
-        "thermal2",
-        "msd",
-        "motor",
-        "servo_gear",
-        "valve_process",
-    ),
+    "output_nonlinearity": ALL_PLANTS,
+    "drift": ALL_PLANTS,
+    "coloured_noise": ALL_PLANTS,
 }
 DT = {  # sampling period of each plant, s
     "heater": 1.0,

@@ -23,10 +23,11 @@ class RecursivePLCase(eqx.Module):
     levels: Float[Array, " 4"]
     order: int = eqx.field(static=True)
 
-    def plant(self) -> Hammerstein:
+    def plant(self, dt: float | None = None) -> Hammerstein:
         linear = DiscreteTransferFunction(
             jnp.concatenate([jnp.zeros(1), self.b]),
             jnp.concatenate([jnp.ones(1), self.a]),
+            dt=dt,
         )
         return Hammerstein(self.nonlinearity, linear)
 
@@ -178,9 +179,4 @@ def seed001_plant():
     $K_1 = 1, K_2 = 2, D_1 = 1, D_2 = -2, L_1 = 1, L_2 = -2$, $V = (-6, -3, 3, 6)$,
     with `dt = 1`."""
     c = paper_case()
-    G = DiscreteTransferFunction(
-        jnp.concatenate([jnp.zeros(1), c.b]),
-        jnp.concatenate([jnp.ones(1), c.a]),
-        dt=1.0,
-    )
-    return Hammerstein(c.nonlinearity, G), c.levels, c.order
+    return c.plant(dt=1.0), c.levels, c.order

@@ -32,7 +32,8 @@ def samples_to_tolerance(errors: np.ndarray, tol: float) -> int | None:
 def reproduce_section_vc(*, periods: int = 2000):
     """Section V.C noise-free: Theta*, the gradient run and its convergence times.
 
-    **Returns:** `(summary dict, RecursivePLResult, RecursivePLCase)`.
+    **Returns:** `(summary dict, RecursivePLResult, RecursivePLCase, the
+    parameters recovered from every estimate of the history)`.
     """
     case = paper_case()
     _, v = pe_impulse_sequence(case.levels, order=2, periods=periods)
@@ -98,7 +99,7 @@ def reproduce_section_vc(*, periods: int = 2000):
         f"{counts['theta_1e-06']}; physical (a, b, F(Vj), K, H): "
         f"{counts['physical_0.001']} / {counts['physical_1e-06']}",
     ]
-    return summary, res, case
+    return summary, res, case, hist
 
 
 def write_section_vc(
@@ -110,9 +111,8 @@ def write_section_vc(
     """
     from ...plotting.recursive_pl import plot_convergence, plot_fig3a, plot_fig3b
 
-    summary, res, case = reproduce_section_vc(periods=periods)
+    summary, res, case, hist = reproduce_section_vc(periods=periods)
     t = np.arange(res.history.shape[0])
-    hist = recover_history(res)
     names = [prefix + n for n in ("fig3a.png", "fig3b.png", "convergence.png")]
     plot_fig3a(t, res.history, case.theta_star()).savefig(out / names[0], dpi=dpi)
     plot_fig3b(t, hist, case).savefig(out / names[1], dpi=dpi)

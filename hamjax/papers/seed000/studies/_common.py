@@ -4,6 +4,7 @@ the way a study closes (figure, verdict, JSON)."""
 from pathlib import Path
 
 from ...._argtypes import positive_float
+from ....identification.seed000.nbbi_table1 import identify_nbbi
 from ....io import write_json
 from ....models import ContinuousTransferFunction, Hammerstein
 from ....montecarlo.registry import StudyOption
@@ -29,6 +30,14 @@ def study_linear() -> ContinuousTransferFunction:
 def study_plant() -> Hammerstein:
     """The straight backlash of width 0.4 before `study_linear()`."""
     return Hammerstein(straight(0.4), study_linear())
+
+
+def settled_nbbi(y, levels, *, hold: float, dt: float, start: int):
+    """NBBI (Table 1) averaging each hold's second half only (the settled average),
+    with failures returned as values (`throw=False`)."""
+    return identify_nbbi(
+        y, levels, hold=hold, dt=dt, start=start, discard=hold / 2, throw=False
+    )
 
 
 def close_study(fig, ax, out, name: str, summary: dict, verdict: list[str]) -> dict:

@@ -17,7 +17,6 @@ import numpy as np
 
 from ...._argtypes import float_list, positive_float, positive_int
 from ....identification.seed000.fgi_table2 import identify_fgi
-from ....identification.seed000.nbbi_table1 import identify_nbbi
 from ....models import WhiteNoise, add_noise
 from ....montecarlo.config import MonteCarloConfig
 from ....montecarlo.registry import StudyOption, option_values
@@ -30,7 +29,7 @@ from ....signals import (
 )
 from ....simulation import simulate
 from ..border_shapes import cycle_points
-from ._common import DT, LEVELS, OMEGA, close_study, study_plant
+from ._common import DT, LEVELS, OMEGA, close_study, settled_nbbi, study_plant
 
 
 NAME = "fgi-pipeline"
@@ -82,15 +81,7 @@ def run(key, *, realisations: int, chunk: int, out: Path, quiet: bool, args) -> 
             nbbi_key, fgi_key = jr.split(jr.fold_in(key_r, i))
             y1 = add_noise(nbbi_key, w_nbbi, WhiteNoise(sigma))
             y2 = add_noise(fgi_key, w_fgi, WhiteNoise(sigma))
-            est = identify_nbbi(
-                y1,
-                levels,
-                hold=hold,
-                dt=dt,
-                start=v0.shape[0],
-                discard=hold / 2,
-                throw=False,
-            )
+            est = settled_nbbi(y1, levels, hold=hold, dt=dt, start=v0.shape[0])
             exact = identify_fgi(y2, U, throw=False, **kw)
             piped = identify_fgi(
                 y2, est.cycle_values, cycle_stderr=est.uncertainty, throw=False, **kw

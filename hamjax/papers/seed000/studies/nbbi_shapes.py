@@ -22,7 +22,6 @@ import numpy as np
 from ...._argtypes import positive_float, positive_int
 from ...._results import RESULTS
 from ....identification.seed000.fgi_table2 import identify_fgi
-from ....identification.seed000.nbbi_table1 import identify_nbbi
 from ....io import write_json
 from ....models import Hammerstein, WhiteNoise, add_noise
 from ....montecarlo.config import MonteCarloConfig
@@ -36,7 +35,7 @@ from ....signals import (
 from ....signals.staircase import staircase_cycle_levels
 from ....simulation import simulate
 from ..border_shapes import SHAPES, cycle_points
-from ._common import DT, noise_option, study_linear
+from ._common import DT, noise_option, settled_nbbi, study_linear
 
 
 NAME = "nbbi-shapes"
@@ -83,15 +82,7 @@ def run(key, *, realisations: int, chunk: int, out: Path, quiet: bool, args) -> 
         U = cycle_points(bl, levels)
         w1 = simulate(plant, v_nbbi, dt=dt)
         w2 = simulate(plant, v_fgi, dt=dt)
-        clean = identify_nbbi(
-            w1,
-            levels,
-            hold=hold,
-            dt=dt,
-            start=v0.shape[0],
-            discard=hold / 2,
-            throw=False,
-        )
+        clean = settled_nbbi(w1, levels, hold=hold, dt=dt, start=v0.shape[0])
         fa, fd = np.asarray(bl.ascending(cyc)), np.asarray(bl.descending(cyc))
         Un = np.asarray(U)
         on_border = np.r_[np.isclose(Un[:n], fa[:n]), np.isclose(Un[n:], fd[n:])]
@@ -115,15 +106,8 @@ def run(key, *, realisations: int, chunk: int, out: Path, quiet: bool, args) -> 
         res = {"nbbi_rmse": [], "g1_err": []}
         for i, (w1, w2, U, _) in enumerate(setups):
             k1, k2 = jr.split(jr.fold_in(key_r, i))
-            est = identify_nbbi(
-                add_noise(k1, w1, WhiteNoise(noise)),
-                levels,
-                hold=hold,
-                dt=dt,
-                start=v0.shape[0],
-                discard=hold / 2,
-                throw=False,
-            )
+            y1 = add_noise(k1, w1, WhiteNoise(noise))
+            est = settled_nbbi(y1, levels, hold=hold, dt=dt, start=v0.shape[0])
             fgi = identify_fgi(
                 add_noise(k2, w2, WhiteNoise(noise)),
                 est.cycle_values,

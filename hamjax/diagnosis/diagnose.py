@@ -11,7 +11,13 @@ import numpy as np
 
 from ..models import Hammerstein
 from .attribute import Attribution, attribute
-from .layout import bucket, describe_nominal, n_free_parameters, prepare
+from .layout import (
+    NOMINAL_UNCERTAINTY,
+    bucket,
+    describe_nominal,
+    n_free_parameters,
+    prepare,
+)
 from .locate import locate
 from .noise_fit import compile_in_background
 from .probabilities import probabilities
@@ -120,7 +126,8 @@ def _result(prep, att: Attribution, val: dict) -> GapDiagnosis:
         shrink=att.shrink,
         ranking=ranking,
         where=where,
-        tests=att.tests,
+        tests=att.tests
+        | {"nominal_prior": {"weight": float(prep.arrays.prior_weight)}},
         gap_definition=definition,
         t=val["t"],
         v=val["v"],
@@ -137,6 +144,7 @@ def diagnose_many(
     *,
     cases_per_batch: int = CASES_PER_BATCH,
     on_result: Callable[[int, GapDiagnosis], None] | None = None,
+    nominal_uncertainty: float | None = NOMINAL_UNCERTAINTY,
 ) -> list[GapDiagnosis]:
     """Diagnose several cases: `(plant, dt, estimation, validation)` each, the records
     being `{"t", "v", "y"}` dicts of NumPy arrays.
@@ -145,7 +153,10 @@ def diagnose_many(
     few) and taken in order of map kind and length, so that a batch holds cases
     alike; per length, their candidate rows go through one compiled batch
     (`schedule.run_queue`) of the screening rows of `cases_per_batch` cases,
-    split over the devices. `on_result(i, diagnosis)` is
+    split over the devices. Every re-fit of the nominal parameters is a
+    maximum-a-posteriori fit under a Gaussian prior at nominal of relative std
+    `nominal_uncertainty` (`layout.prior_weight`; None: a negligible prior).
+    `on_result(i, diagnosis)` is
     called as soon as case `i` is done, so a caller can write each result while the
     others are still being fitted.
 
@@ -171,7 +182,12 @@ def diagnose_many(
     for members in groups.values():
         length = max(_length_group(lengths[i]) for i in members)
         preps = [
-            prepare(*items[i], length, n_params)  # type: ignore[arg-type]
+            prepare(
+                *items[i],  # type: ignore[arg-type]
+                length,
+                n_params,
+                nominal_uncertainty=nominal_uncertainty,
+            )
             for i in members
         ]
 
@@ -189,7 +205,12 @@ def diagnose_many(
 
 
 def diagnose_gap(
-    plant: Hammerstein, dt: float, estimation: dict, validation: dict
+    plant: Hammerstein,
+    dt: float,
+    estimation: dict,
+    validation: dict,
+    *,
+    nominal_uncertainty: float | None = NOMINAL_UNCERTAINTY,
 ) -> GapDiagnosis:
     """Diagnose the gap between `plant` (the nominal model) and two records.
 
@@ -201,6 +222,11 @@ def diagnose_gap(
     - `estimation`, `validation`: `{"t", "v", "y"}` dicts of NumPy arrays, two
       separate experiments; effects are fitted on the first, scored on the second.
 
+    - `nominal_uncertainty`: relative std of the nominal parameters (the prior of
+      every re-fit; default 0.2).
+
     **Returns:** a `GapDiagnosis` (the contract's fields and the figure data).
     """
-    return diagnose_many([(plant, dt, estimation, validation)])[0]
+    return diagnose_many(
+        [(plant, dt, estimation, validation)], nominal_uncertainty=nominal_uncertainty
+    )[0]

@@ -20,7 +20,7 @@ from .layout import (
 )
 from .locate import locate
 from .noise_fit import compile_in_background
-from .probabilities import probabilities
+from .probabilities import effective_samples, probabilities
 from .schedule import CASES_PER_BATCH, batch_size, run_queue
 
 
@@ -79,6 +79,18 @@ def _length_group(n: int) -> int:
     return int(2 ** np.ceil(np.log2(bucket(n))))
 
 
+def _evidence_samples(att: Attribution, mse: dict) -> float:
+    """`probabilities.effective_samples` of the named effect against its best
+    rival (the nominal model's residual for `none`)."""
+    residual = {"none": att.r_before} | {c.effect: c.residual for c in att.candidates}
+    named = att.chosen.effect if att.chosen is not None else "none"
+    rivals = [k for k in mse if k != named]
+    if named not in residual or not rivals:
+        return float(att.r_before.shape[0])
+    rival = min(rivals, key=lambda k: mse[k])
+    return effective_samples(residual[named], residual[rival])
+
+
 def _result(prep, att: Attribution, val: dict) -> GapDiagnosis:
     chosen = att.chosen
     if chosen is None:
@@ -117,9 +129,10 @@ def _result(prep, att: Attribution, val: dict) -> GapDiagnosis:
     mse = {"none": att.gap_before**2} | {
         c.effect: c.gap_after**2 for c in att.candidates
     }
+    n_eff = _evidence_samples(att, mse)
     return GapDiagnosis(
         effect=att.effect,
-        probabilities=probabilities(att.effect, mse, len(val["y"]), att.shrink),
+        probabilities=probabilities(att.effect, mse, n_eff, att.shrink),
         gap_before=att.gap_before,
         gap_after=att.gap_after,
         noise_floor=att.noise_floor,
@@ -127,7 +140,10 @@ def _result(prep, att: Attribution, val: dict) -> GapDiagnosis:
         ranking=ranking,
         where=where,
         tests=att.tests
-        | {"nominal_prior": {"weight": float(prep.arrays.prior_weight)}},
+        | {
+            "nominal_prior": {"weight": float(prep.arrays.prior_weight)},
+            "evidence": {"samples": len(val["y"]), "effective_samples": n_eff},
+        },
         gap_definition=definition,
         t=val["t"],
         v=val["v"],

@@ -457,3 +457,8 @@ def _static_numpy(nom: Nominal, v: np.ndarray) -> np.ndarray:
     if nom.nl_kind == NL_TABULATED:
         return np.interp(v, nom.tab_v, nom.tab_u)
     return np.asarray(v, float)
+
+
+def nominal_output(plant: Hammerstein, v: np.ndarray, dt: float) -> np.ndarray:
+    """The nominal plant's output from rest for the input samples `v` (NumPy)."""
+    return _response_numpy(plant.linear, _static_numpy(describe_nominal(plant), v), dt)

@@ -5,6 +5,8 @@ import sys
 import time
 from pathlib import Path
 
+from .._argtypes import positive_float
+
 
 def register(sub) -> None:
     p = sub.add_parser(
@@ -19,6 +21,14 @@ def register(sub) -> None:
     p.add_argument("cases", nargs="+", type=Path, metavar="CASE")
     p.add_argument("--out", type=Path, required=True, help="output folder")
     p.add_argument("--figures", action="store_true", help="also write the figures")
+    p.add_argument(
+        "--nominal-uncertainty",
+        type=positive_float,
+        metavar="U",
+        help="relative std of the nominal model's parameters: every re-fit is a "
+        "maximum-a-posteriori fit under a Gaussian prior at nominal of this width "
+        "(default: hamjax.diagnosis.layout.NOMINAL_UNCERTAINTY, 0.2)",
+    )
     p.add_argument(
         "--force",
         action="store_true",
@@ -150,7 +160,14 @@ def run(args: argparse.Namespace) -> int:
 
     if items:
         try:
-            diagnose_many(items, on_result=write)
+            prior = {}
+            if args.nominal_uncertainty is not None:
+                prior["nominal_uncertainty"] = args.nominal_uncertainty
+            diagnose_many(
+                items,
+                on_result=write,
+                **prior,
+            )
         except DiagnosisNotFinite as err:
             raise UserInputError(f"{where[err.index][0]}: {err}") from None
         except ValueError as err:

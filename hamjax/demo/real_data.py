@@ -5,8 +5,6 @@ no model given, so hamjax fits its own nominal first). Skipped, with a note, whe
 
 from pathlib import Path
 
-import numpy as np
-
 
 # The repository's parent holds `shared/` (as CI and the studies lay it out).
 REAL = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "real"
@@ -16,9 +14,9 @@ def run(key, out: Path) -> list[tuple[str, str]]:
     del key  # measured data: nothing random
     from ..diagnosis.diagnose import diagnose_gap
     from ..diagnosis.nominal_fit import fit_nominal
-    from ..diagnosis.real_data import real_cases
     from ..diagnosis.report import write_diagnosis
     from ..io import model_to_dict, write_json
+    from ..papers.gap.real_data import gap_records, real_cases
     from ..plotting.diagnosis import save_diagnosis_figures
 
     cases = real_cases(REAL) if REAL.is_dir() else {}
@@ -26,9 +24,7 @@ def run(key, out: Path) -> list[tuple[str, str]]:
         print(f"[demo] real data: skipped ({REAL} not found)")
         return []
     est, val, documented = cases["cascaded_tanks"]
-    # centred on the estimation record's means (the nominal has no offsets)
-    mv, my = float(np.mean(est["v"])), float(np.mean(est["y"]))
-    est, val = ({**r, "v": r["v"] - mv, "y": r["y"] - my} for r in (est, val))
+    est, val = gap_records(est, val)  # as `hamjax study real-data-gap` writes it
     dt = float(est["t"][1] - est["t"][0])
     plant = fit_nominal(dt, est)
     d = diagnose_gap(plant, dt, est, val)

@@ -103,6 +103,9 @@ class CaseArrays(eqx.Module):
     out_centre: Float[Array, ""]
     out_half: Float[Array, ""]
     y_scale: Float[Array, ""]
+    # weight of the Gaussian prior at nominal on the scaled re-fit parameters
+    # (`layout.prior_weight`, the user's stated nominal uncertainty)
+    prior_weight: Float[Array, ""]
 
 
 class Row(eqx.Module):

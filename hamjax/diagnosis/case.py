@@ -72,7 +72,7 @@ def read_case(folder: str | Path) -> GapCase:
     model_path = folder / "model.json"
     if model_path.exists():
         model, model_dt = load_model(model_path)
-        require_stable(model, model_path)
+        require_stable(model, model_path, integrating=True)
         if model_dt is not None and not np.isclose(model_dt, dt_e, rtol=1e-6):
             raise UserInputError(
                 f"{model_path}: discrete model dt {model_dt:.6g} s differs from the data's "

@@ -11,10 +11,16 @@ import numpy as np
 
 from ..models import Hammerstein
 from .attribute import Attribution, attribute
-from .layout import bucket, describe_nominal, n_free_parameters, prepare
+from .layout import (
+    NOMINAL_UNCERTAINTY,
+    bucket,
+    describe_nominal,
+    n_free_parameters,
+    prepare,
+)
 from .locate import locate
 from .noise_fit import compile_in_background
-from .probabilities import probabilities
+from .probabilities import effective_samples, probabilities
 from .schedule import CASES_PER_BATCH, batch_size, run_queue
 
 
@@ -73,6 +79,18 @@ def _length_group(n: int) -> int:
     return int(2 ** np.ceil(np.log2(bucket(n))))
 
 
+def _evidence_samples(att: Attribution, mse: dict) -> float:
+    """`probabilities.effective_samples` of the named effect against its best
+    rival (the nominal model's residual for `none`)."""
+    residual = {"none": att.r_before} | {c.effect: c.residual for c in att.candidates}
+    named = att.chosen.effect if att.chosen is not None else "none"
+    rivals = [k for k in mse if k != named]
+    if named not in residual or not rivals:
+        return float(att.r_before.shape[0])
+    rival = min(rivals, key=lambda k: mse[k])
+    return effective_samples(residual[named], residual[rival])
+
+
 def _result(prep, att: Attribution, val: dict) -> GapDiagnosis:
     chosen = att.chosen
     if chosen is None:
@@ -111,16 +129,21 @@ def _result(prep, att: Attribution, val: dict) -> GapDiagnosis:
     mse = {"none": att.gap_before**2} | {
         c.effect: c.gap_after**2 for c in att.candidates
     }
+    n_eff = _evidence_samples(att, mse)
     return GapDiagnosis(
         effect=att.effect,
-        probabilities=probabilities(att.effect, mse, len(val["y"]), att.shrink),
+        probabilities=probabilities(att.effect, mse, n_eff, att.shrink),
         gap_before=att.gap_before,
         gap_after=att.gap_after,
         noise_floor=att.noise_floor,
         shrink=att.shrink,
         ranking=ranking,
         where=where,
-        tests=att.tests,
+        tests=att.tests
+        | {
+            "nominal_prior": {"weight": float(prep.arrays.prior_weight)},
+            "evidence": {"samples": len(val["y"]), "effective_samples": n_eff},
+        },
         gap_definition=definition,
         t=val["t"],
         v=val["v"],
@@ -137,6 +160,7 @@ def diagnose_many(
     *,
     cases_per_batch: int = CASES_PER_BATCH,
     on_result: Callable[[int, GapDiagnosis], None] | None = None,
+    nominal_uncertainty: float | None = NOMINAL_UNCERTAINTY,
 ) -> list[GapDiagnosis]:
     """Diagnose several cases: `(plant, dt, estimation, validation)` each, the records
     being `{"t", "v", "y"}` dicts of NumPy arrays.
@@ -145,7 +169,10 @@ def diagnose_many(
     few) and taken in order of map kind and length, so that a batch holds cases
     alike; per length, their candidate rows go through one compiled batch
     (`schedule.run_queue`) of the screening rows of `cases_per_batch` cases,
-    split over the devices. `on_result(i, diagnosis)` is
+    split over the devices. Every re-fit of the nominal parameters is a
+    maximum-a-posteriori fit under a Gaussian prior at nominal of relative std
+    `nominal_uncertainty` (`layout.prior_weight`; None: a negligible prior).
+    `on_result(i, diagnosis)` is
     called as soon as case `i` is done, so a caller can write each result while the
     others are still being fitted.
 
@@ -171,7 +198,12 @@ def diagnose_many(
     for members in groups.values():
         length = max(_length_group(lengths[i]) for i in members)
         preps = [
-            prepare(*items[i], length, n_params)  # type: ignore[arg-type]
+            prepare(
+                *items[i],  # type: ignore[arg-type]
+                length,
+                n_params,
+                nominal_uncertainty=nominal_uncertainty,
+            )
             for i in members
         ]
 
@@ -189,7 +221,12 @@ def diagnose_many(
 
 
 def diagnose_gap(
-    plant: Hammerstein, dt: float, estimation: dict, validation: dict
+    plant: Hammerstein,
+    dt: float,
+    estimation: dict,
+    validation: dict,
+    *,
+    nominal_uncertainty: float | None = NOMINAL_UNCERTAINTY,
 ) -> GapDiagnosis:
     """Diagnose the gap between `plant` (the nominal model) and two records.
 
@@ -201,6 +238,11 @@ def diagnose_gap(
     - `estimation`, `validation`: `{"t", "v", "y"}` dicts of NumPy arrays, two
       separate experiments; effects are fitted on the first, scored on the second.
 
+    - `nominal_uncertainty`: relative std of the nominal parameters (the prior of
+      every re-fit; default 0.2).
+
     **Returns:** a `GapDiagnosis` (the contract's fields and the figure data).
     """
-    return diagnose_many([(plant, dt, estimation, validation)])[0]
+    return diagnose_many(
+        [(plant, dt, estimation, validation)], nominal_uncertainty=nominal_uncertainty
+    )[0]

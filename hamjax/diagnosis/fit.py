@@ -36,7 +36,6 @@ from .effects.time_delay import delay
 
 
 LAMBDA0 = 1e-3  # initial Levenberg-Marquardt damping
-PRIOR = 1e-6  # weight of the prior at nominal on the scaled re-fit parameters
 LAMBDA_CONVERGED = 1e-2  # largest damping at which a small decrease is convergence
 BLOCK = 256  # samples per block of `normal_equations`
 
@@ -158,12 +157,14 @@ def levenberg_marquardt(theta0, lam0, args, max_steps):
     Hand-rolled rather than `optx.LevenbergMarquardt`: under `vmap` over ~20
     candidate rows the optimistix solver cost 17 s per case (and 80 s to
     compile) against ~3 s here, for the same damped Gauss-Newton iteration. It
-    works on the normal equations (`normal_equations`) plus a weak prior at the
-    nominal parameters: where the estimation record leaves a direction of the
-    re-fit undetermined (the gain against the slopes of a piecewise-linear map,
-    an unexcited segment), every start then ends at the same point instead of
-    wherever its path stopped (a prior std of ~ 1/sqrt(PRIOR) per unit of scaled
-    output noise on the scaled re-fit parameters).
+    works on the normal equations (`normal_equations`) plus a Gaussian prior at
+    the nominal parameters, of weight `case.prior_weight` (`layout.prior_weight`:
+    the user's stated nominal uncertainty, so the cost is the negative log
+    posterior times the noise variance): a re-fit explains only what the stated
+    uncertainty makes plausible, and where the estimation record leaves a
+    direction of the re-fit undetermined (the gain against the slopes of a
+    piecewise-linear map, an unexcited segment) every start ends at the same
+    point instead of wherever its path stopped.
 
     One call site of the model keeps the compilation small: each iteration
     evaluates the trial point, accepts it if the cost fell, then proposes the
@@ -182,7 +183,8 @@ def levenberg_marquardt(theta0, lam0, args, max_steps):
     def body(state):
         theta, trial, sse, H, g, coef, cost, lam, k, _ = state
         (sse_n, H_n, g_n), coef_n = _normal_equations(trial, row, case, memory, table)
-        cost_n = sse_n + PRIOR * jnp.sum(jnp.where(mask, trial, 0.0) ** 2)
+        prior = case.prior_weight
+        cost_n = sse_n + prior * jnp.sum(jnp.where(mask, trial, 0.0) ** 2)
         better = cost_n < cost
         # A small decrease counts as convergence only for a nearly undamped step:
         # under heavy damping the step is short, so the decrease is small whatever
@@ -195,8 +197,8 @@ def levenberg_marquardt(theta0, lam0, args, max_steps):
         )
         cost_new = jnp.where(better, cost_n, cost)
         lam = jnp.where(better, lam / 3, lam * 4)
-        Hp = H + PRIOR * jnp.diag(mask.astype(theta.dtype))
-        gp = g + PRIOR * jnp.where(mask, theta, 0.0)
+        Hp = H + prior * jnp.diag(mask.astype(theta.dtype))
+        gp = g + prior * jnp.where(mask, theta, 0.0)
         d = jnp.diag(Hp) + 1e-12
         step = -cholesky_solve(Hp + lam * jnp.diag(d), gp)
         done = (better & small) | (lam > 1e10) | (jnp.max(jnp.abs(step)) < 1e-12)

@@ -42,6 +42,7 @@ from .effects import (
 )
 from .effects._base import output_half_range, scale_span
 from .effects.time_delay import MAX_DELAY
+from .residuals import noise_floor_hf
 
 
 DETERMINISTIC = (
@@ -60,6 +61,31 @@ N_MAX = 4
 T_MAX = 64
 MAX_EFFECT_SLOTS = 2  # most slots any one candidate row frees
 QUANTILES = (0.02, 0.05, 0.1, 0.2, 0.3, 0.5, 0.7, 0.8, 0.9, 0.95, 0.98)
+# One unit of a scaled nominal parameter moves it by this fraction of its
+# magnitude (slopes, gain, scales, denominator coefficients) or by half of it times
+# the input range (breakpoints and levels of a piecewise-linear map).
+RELATIVE_STEP = 0.1
+PRIOR_FLOOR = 1e-6  # the prior's weight without a stated uncertainty (a tie-break)
+NOMINAL_UNCERTAINTY = 0.2  # default relative std of the nominal parameters
+
+
+def prior_weight(uncertainty: float | None, noise_std: float) -> float:
+    r"""Weight of the Gaussian prior at nominal on the scaled re-fit parameters.
+
+    A user who states that each nominal parameter is uncertain by a relative
+    standard deviation $u$ puts the prior $\theta_j \sim N(0, (u/\rho)^2)$ on
+    its scaled deviation ($\rho$ = `RELATIVE_STEP`); with white output noise of
+    std $\sigma$ in the fit's scaled units, the negative log posterior times
+    $\sigma^2$ is $\sum_k r_k^2 + (\sigma\rho/u)^2 \sum_j \theta_j^2$, so the
+    weight is $(\sigma\rho/u)^2$ (never below `PRIOR_FLOOR`; `uncertainty=None`:
+    the floor alone). $\sigma$ is read off the nominal residual's upper half band
+    (`residuals.noise_floor_hf`, which over-estimates rather than under-estimates,
+    so the prior errs on the firm side)."""
+    if uncertainty is None:
+        return PRIOR_FLOOR
+    if not (np.isfinite(uncertainty) and uncertainty > 0):
+        raise ValueError(f"the nominal uncertainty must be > 0, got {uncertainty}")
+    return max(PRIOR_FLOOR, (noise_std * RELATIVE_STEP / uncertainty) ** 2)
 
 
 def bucket(n: int) -> int:
@@ -192,8 +218,13 @@ def prepare(
     val: dict,
     length: int | None = None,
     n_params: int | None = None,
+    *,
+    nominal_uncertainty: float | None = None,
 ) -> Prepared:
-    """Case arrays and candidate rows for `plant` and the two records (`t,v,y` dicts)."""
+    """Case arrays and candidate rows for `plant` and the two records (`t,v,y` dicts).
+
+    `nominal_uncertainty`: the relative std of the nominal parameters, the prior
+    of every re-fit (`prior_weight`); None for a negligible prior."""
     nom = describe_nominal(plant)
     n_est, n_val = est["v"].shape[0], val["v"].shape[0]
     L = length or bucket(max(n_est, n_val))
@@ -231,16 +262,16 @@ def prepare(
         val_ = nominal_values[name]
         anchor[i] = neutral[i] = val_
         if name in ("k1", "k2"):
-            scale[i] = 0.1 * max(abs(val_), 0.1)
+            scale[i] = RELATIVE_STEP * max(abs(val_), 0.1)
         elif name in ("d1", "d2", "l1", "l2"):
-            scale[i] = 0.05 * span
+            scale[i] = 0.5 * RELATIVE_STEP * span
         else:
-            scale[i] = 0.1
-    den_scale = 0.1 * max(np.abs(den_slots).max(), 1e-6)
+            scale[i] = RELATIVE_STEP
+    den_scale = RELATIVE_STEP * max(np.abs(den_slots).max(), 1e-6)
     for j in range(N_MAX):
         i = len(NOMINAL_SLOTS) + len(EFFECT_SLOTS) + j
         anchor[i] = neutral[i] = den_slots[j]
-        scale[i] = max(0.1 * abs(den_slots[j]), 0.1 * den_scale)
+        scale[i] = RELATIVE_STEP * max(abs(den_slots[j]), den_scale)
     w_half = output_half_range(ctx)
     w_centre = 0.0  # bend about w = 0 (a sensor's zero): a pure quadratic stays exact
     effect_scale = effect_scales(ctx)
@@ -293,6 +324,8 @@ def prepare(
     y_est, _ = _pad_record(est["y"], L)
     v_val, m_val = _pad_record(val["v"], L)
     y_val, _ = _pad_record(val["y"], L)
+    y_scale = max(float(np.std(est["y"])), 1e-12)
+    noise_std = noise_floor_hf(np.asarray(est["y"]) - w_est)
     # NumPy on the host: the fits stack and gather these without eager JAX ops
     f = lambda x: np.asarray(x, dtype=float)
     arrays = CaseArrays(
@@ -316,7 +349,8 @@ def prepare(
         neutral=f(neutral),
         out_centre=f(w_centre),
         out_half=f(w_half),
-        y_scale=f(max(float(np.std(est["y"])), 1e-12)),
+        y_scale=f(y_scale),
+        prior_weight=f(prior_weight(nominal_uncertainty, noise_std / y_scale)),
     )
     return Prepared(arrays, rows, ctx, nom, n_est, n_val, w_est, w_val, u_val)
 
@@ -423,3 +457,8 @@ def _static_numpy(nom: Nominal, v: np.ndarray) -> np.ndarray:
     if nom.nl_kind == NL_TABULATED:
         return np.interp(v, nom.tab_v, nom.tab_u)
     return np.asarray(v, float)
+
+
+def nominal_output(plant: Hammerstein, v: np.ndarray, dt: float) -> np.ndarray:
+    """The nominal plant's output from rest for the input samples `v` (NumPy)."""
+    return _response_numpy(plant.linear, _static_numpy(describe_nominal(plant), v), dt)

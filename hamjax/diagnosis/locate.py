@@ -7,7 +7,13 @@ import math
 
 import numpy as np
 
-from .residuals import Z_95, billings_voon, cross_correlation, ljung_box
+from .residuals import (
+    Z_95,
+    billings_voon,
+    cross_correlation,
+    feedback_test,
+    ljung_box,
+)
 
 
 N_BANDS = 6
@@ -204,10 +210,17 @@ def _axes(t, v, r, u, floor, dt) -> dict:
 
 def locate(t, v, r_before, r_after, u, floor, dt) -> dict:
     """The `where` block of diagnosis.json: every axis for the residual of the
-    nominal model (`before`) and of the augmented model (`after`)."""
+    nominal model (`before`) and of the augmented model (`after`), and whether
+    the record looks closed-loop (`residuals.feedback_test` on the augmented
+    model's residual)."""
     t, v, u = (np.asarray(x, float) for x in (t, v, u))
+    if period_of(v) is None:
+        feedback = feedback_test(np.asarray(r_after, float), v)
+    else:
+        feedback = {"applicable": False, "why": "periodic input"}
     return {
         "noise_floor": float(floor),
+        "feedback": feedback,
         "before": _axes(t, v, np.asarray(r_before, float), u, floor, dt),
         "after": _axes(t, v, np.asarray(r_after, float), u, floor, dt),
     }

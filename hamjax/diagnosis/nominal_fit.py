@@ -10,6 +10,13 @@ piecewise-linear parameters or the gain (the numerator shape stays the ARX one).
 The identity map is what an input with only a few levels (two, in a step test)
 can determine; a piecewise-linear map there is not identifiable. Fits whose
 poles left the unit circle are not candidates.
+
+Integrating plants (a level loop, a position axis) are candidates too:
+$B/(A\\,(1 - q^{-1}))$ with $\\deg A \\in \\{1, 2\\}$, the same map choices, fitted
+by the same output-error refinement on the increments $\\Delta y_k = y_k -
+y_{k-1}$ ($y_{-1} = 0$: the record starts from rest) with the integrator fixed;
+every candidate is then scored by BIC on the simulated $y$ itself, so the
+integrating and the stable structures compete on the same error.
 """
 
 import jax.tree_util as jtu
@@ -18,10 +25,18 @@ import numpy as np
 from ..models import DiscreteTransferFunction, Hammerstein, Identity, PiecewiseLinear
 from .augmented import slot_names
 from .fit import fit_rows
-from .layout import MAX_EFFECT_SLOTS, N_MAX, prepare
+from .layout import (
+    MAX_EFFECT_SLOTS,
+    N_MAX,
+    nominal_output,
+    prepare,
+)
 
 
 ORDERS = (1, 2, 3)
+# orders of the stable part of an integrating structure B/(A (1 - q^-1)): level
+# loops and position axes (the whole block stays within the diagnosis's N_MAX)
+INTEGRATING_ORDERS = (1, 2)
 NOMINAL_STEPS = 100  # Levenberg-Marquardt budget of each nominal fit
 
 
@@ -39,51 +54,66 @@ def _arx(v: np.ndarray, y: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
     return b, np.real(np.poly(roots))
 
 
+def _fit_structure(dt, record, nl, b, a, n_params):
+    """Output-error fit of `nl` then `B/A` (started at `b, a`) on `record`: the
+    fitted static map, the discrete block, and the parameter count."""
+    names = slot_names(N_MAX)
+    start = Hammerstein(nl, DiscreteTransferFunction(b, a, dt))
+    prep = prepare(start, dt, record, record, n_params=n_params)
+    rows = [r for name, r in prep.rows if name == "parameter_mismatch"]
+    stacked = jtu.tree_map(lambda *x: np.stack(x), *rows)
+    fit = fit_rows(stacked, prep.arrays, NOMINAL_STEPS)
+    p = np.asarray(fit.params[0])
+    n = a.shape[0] - 1
+    den = np.r_[1.0, [p[names.index(f"den{j}")] for j in range(1, n + 1)]]
+    gain = p[names.index("gain")]  # 1 beside a piecewise-linear map
+    fitted = Identity()
+    if isinstance(nl, PiecewiseLinear):
+        vals = {
+            s: float(p[names.index(s)]) for s in ("k1", "k2", "d1", "d2", "l1", "l2")
+        }
+        vals["d1"], vals["d2"] = max(vals["d1"], 0.0), min(vals["d2"], 0.0)
+        fitted = PiecewiseLinear(**vals)
+    k = (6 if isinstance(nl, PiecewiseLinear) else 1) + n + 1
+    return fitted, gain * b, den, k
+
+
+def _simulated_sse(plant: Hammerstein, record: dict, dt: float) -> float:
+    return float(
+        np.sum(np.square(record["y"] - nominal_output(plant, record["v"], dt)))
+    )
+
+
 def fit_nominal(dt: float, estimation: dict) -> Hammerstein:
     """Fit the default nominal structure on the estimation record (see module doc)."""
     v, y = estimation["v"], estimation["y"]
+    n_samples = v.shape[0]
     best, best_bic = None, np.inf
-    names = slot_names(N_MAX)
     n_params = N_MAX + 6 + MAX_EFFECT_SLOTS  # one row shape: one compilation
-    for n in ORDERS:
-        b, a = _arx(v, y, n)
-        for nl in (PiecewiseLinear(k1=1.0, k2=1.0), Identity()):
-            start = Hammerstein(nl, DiscreteTransferFunction(b, a, dt))
-            prep = prepare(start, dt, estimation, estimation, n_params=n_params)
-            rows = [r for name, r in prep.rows if name == "parameter_mismatch"]
-            stacked = jtu.tree_map(lambda *x: np.stack(x), *rows)
-            fit = fit_rows(stacked, prep.arrays, NOMINAL_STEPS)
-            sse = float(fit.sse_est[0])
-            p = np.asarray(fit.params[0])
-            pl = isinstance(nl, PiecewiseLinear)
-            k = (6 if pl else 1) + n + 1
-            bic = v.shape[0] * np.log(max(sse, 1e-300) / v.shape[0]) + k * np.log(
-                v.shape[0]
-            )
-            den = np.r_[1.0, [p[names.index(f"den{j}")] for j in range(1, n + 1)]]
-            gain = p[names.index("gain")]  # 1 beside a piecewise-linear map
-            if not (
-                np.isfinite(bic)
-                and bic < best_bic
-                and np.all(np.isfinite(den))
-                and np.isfinite(gain)
-            ):
-                continue
-            linear = DiscreteTransferFunction(gain * b, den, dt)
-            # the output-error fit does not constrain the poles: an unstable
-            # nominal fits the estimation record and diverges on any other
-            if not linear.is_stable():
-                continue
-            fitted = Identity()
-            if pl:
-                vals = {
-                    s: float(p[names.index(s)])
-                    for s in ("k1", "k2", "d1", "d2", "l1", "l2")
-                }
-                vals["d1"], vals["d2"] = max(vals["d1"], 0.0), min(vals["d2"], 0.0)
-                fitted = PiecewiseLinear(**vals)
-            best = Hammerstein(fitted, linear)
-            best_bic = bic
+    # the increments of y (from rest: y[-1] = 0) for the integrating structures
+    increments = {**estimation, "y": np.diff(y, prepend=0.0)}
+    for integrating, orders in ((False, ORDERS), (True, INTEGRATING_ORDERS)):
+        record = increments if integrating else estimation
+        for n in orders:
+            b, a = _arx(v, record["y"], n)
+            for nl in (PiecewiseLinear(k1=1.0, k2=1.0), Identity()):
+                fitted, b_fit, den, k = _fit_structure(dt, record, nl, b, a, n_params)
+                if not (np.all(np.isfinite(den)) and np.all(np.isfinite(b_fit))):
+                    continue
+                # the output-error fit does not constrain the poles: an unstable
+                # block fits the estimation record and diverges on any other
+                if not DiscreteTransferFunction(b_fit, den, dt).is_stable():
+                    continue
+                if integrating:  # the integrator 1/(1 - q^-1), fixed
+                    den = np.convolve(den, [1.0, -1.0])
+                    b_fit = np.r_[b_fit, 0.0]
+                plant = Hammerstein(fitted, DiscreteTransferFunction(b_fit, den, dt))
+                sse = _simulated_sse(plant, estimation, dt)
+                bic = n_samples * np.log(max(sse, 1e-300) / n_samples) + k * np.log(
+                    n_samples
+                )
+                if np.isfinite(bic) and bic < best_bic:
+                    best, best_bic = plant, bic
     if best is None:
         return Hammerstein(Identity(), DiscreteTransferFunction(*_arx(v, y, 1), dt))
     return best

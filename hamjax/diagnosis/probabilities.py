@@ -38,6 +38,7 @@ import math
 import numpy as np
 
 from .attribute import DETERMINISTIC_NAMES, NOISE_NAMES
+from .residuals import autocorrelation
 
 
 # The contract's classes: those the diagnosis tries, the two it does not try yet,
@@ -58,24 +59,61 @@ BETA_STRUCTURAL, BETA_NOISE = 1.75934894, 1.61866354
 TEMPERATURE = 3000.0
 
 
+EVIDENCE_LAGS = 20  # lags of the variance-inflation sum of `effective_samples`
+
+
+def effective_samples(r_named: np.ndarray, r_rival: np.ndarray) -> float:
+    r"""The number of independent samples the evidence of the named effect over
+    its best rival is worth: $N / (1 + 2\sum_{k=1}^{K}\rho_k)$, with $\rho_k$
+    the autocorrelation of the per-sample evidence $d_k = r_{rival,k}^2 -
+    r_{named,k}^2$ ($K$ = `EVIDENCE_LAGS`), the variance-inflation factor of a
+    mean of correlated terms; never above $N$ (a negative sum is not taken as
+    extra evidence) nor below 1. The Gaussian log-likelihood ratio counts every
+    sample as independent, which residuals left smooth in time by an imperfect
+    model are not."""
+    d = np.square(np.asarray(r_rival, float)) - np.square(np.asarray(r_named, float))
+    n = d.shape[0]
+    if n < 2 * EVIDENCE_LAGS or not np.all(np.isfinite(d)) or np.ptp(d) == 0:
+        return float(n)
+    inflation = 1.0 + 2.0 * float(np.sum(autocorrelation(d, EVIDENCE_LAGS)[1:]))
+    return float(n / min(max(inflation, 1.0), n))
+
+
+KINDS = ("none", "parameter_mismatch", "structural", "noise")  # one offset each
+
+
+def verdict_kind(effect: str) -> str:
+    """Which offset $\\beta_g$ a verdict takes (one of `KINDS`)."""
+    if effect in ("none", "parameter_mismatch"):
+        return effect
+    return "noise" if effect in NOISE_NAMES else "structural"
+
+
 def _kind_offset(effect: str) -> float:
-    if effect in BETA:
-        return BETA[effect]
-    return BETA_NOISE if effect in NOISE_NAMES else BETA_STRUCTURAL
+    kind = verdict_kind(effect)
+    if kind in BETA:
+        return BETA[kind]
+    return BETA_NOISE if kind == "noise" else BETA_STRUCTURAL
 
 
-def named_confidence(effect: str, mse: dict[str, float], n: int) -> float:
+def evidence(effect: str, mse: dict[str, float], n: float) -> float:
+    """$\\mathrm{sign}(\\Delta)\\log(1 + |\\Delta|)$ of the named effect over its best
+    rival (module docstring), the term the calibration's slope multiplies."""
+    other = min(v for k, v in mse.items() if k != effect)
+    delta = 0.5 * n * math.log(max(other, 1e-300) / max(mse[effect], 1e-300))
+    return math.copysign(math.log1p(abs(delta)), delta)
+
+
+def named_confidence(effect: str, mse: dict[str, float], n: float) -> float:
     """$p_{named}$ from the validation MSE of every candidate (`none` included)."""
     if effect not in mse or len(mse) < 2:
         return 1.0 / len(CLASSES)
-    other = min(v for k, v in mse.items() if k != effect)
-    delta = 0.5 * n * math.log(max(other, 1e-300) / max(mse[effect], 1e-300))
-    z = ALPHA * math.copysign(math.log1p(abs(delta)), delta) + _kind_offset(effect)
+    z = ALPHA * evidence(effect, mse, n) + _kind_offset(effect)
     return 1.0 / (1.0 + math.exp(-z))
 
 
 def probabilities(
-    effect: str, mse: dict[str, float], n: int, shrink: float
+    effect: str, mse: dict[str, float], n: float, shrink: float
 ) -> dict[str, float]:
     """Every class of the contract with its probability (see the module docstring).
 

@@ -106,6 +106,28 @@ def _significant_axes(where: dict) -> list[str]:
     return out
 
 
+def where_in_brief(where: dict) -> str:
+    """Where the gap of the nominal model lies, in one line: the frequency band
+    holding most of its power above the floor, and memory (rising vs falling)
+    when that is significant."""
+    b = where["before"]
+    sig = [x for x in b["frequency"] if x["significant"]]
+    parts = []
+    if sig:
+        top = max(sig, key=lambda x: x["power_over_floor"])
+        parts.append(
+            f"{top['f_low_hz']:.3g}-{top['f_high_hz']:.3g} Hz "
+            f"({top['power_over_floor']:.3g}x floor)"
+        )
+    else:
+        parts.append("no band above the floor")
+    if b["direction"].get("significant"):
+        parts.append("depends on the direction of motion")
+    if b["time"]["trend"]["significant"]:
+        parts.append("slow trend")
+    return "; ".join(parts)
+
+
 def report_markdown(d, name: str = "case", nominal: str | None = None) -> str:
     """A page a person reads in two minutes. `nominal`: where the nominal model
     came from (e.g. the user's `model.json`, or fitted by hamjax)."""
@@ -127,6 +149,14 @@ def report_markdown(d, name: str = "case", nominal: str | None = None) -> str:
         )
     if nominal is not None:
         lines.append(f"- nominal model: {nominal}")
+    fb = d.where.get("feedback", {})
+    if fb.get("closed_loop"):
+        lines.append(
+            f"- the record looks closed-loop: the residual predicts the input "
+            f"{fb['lag']} samples later (z = {fb['z']:.1f} > {fb['threshold']:.1f}, "
+            "Ljung's test for feedback at 1 %): v is a controller's output, so the "
+            "noise reaches it and simulation-error fits can be biased"
+        )
     lines += [
         f"- gap before (nominal model): {d.gap_before:.4g} (units of y)",
         f"- gap after (nominal + named effect, fitted on estimation data): "

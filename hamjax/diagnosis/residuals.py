@@ -171,3 +171,57 @@ def _bonferroni_z(alpha: float, m: int) -> float:
         df = -math.exp(-z * z / 2) / math.sqrt(2 * math.pi)
         z -= f / df
     return z
+
+
+FEEDBACK_LAGS = 20  # future-input lags tested
+FEEDBACK_AR = 10  # order of the input's prewhitening AR model
+FEEDBACK_ALPHA = 0.01  # false-alarm level of the feedback test on open-loop records
+
+
+def feedback_test(
+    r: np.ndarray,
+    v: np.ndarray,
+    *,
+    max_lag: int = FEEDBACK_LAGS,
+    order: int = FEEDBACK_AR,
+    alpha: float = FEEDBACK_ALPHA,
+) -> dict:
+    r"""Does the record look closed-loop? The test for feedback of Ljung
+    (*System Identification*, 2nd ed., §16.6): in open loop the output error $r$
+    is a function of past inputs and of noise independent of them, so it cannot
+    predict present or future inputs; a controller closing the loop makes
+    $v_{k+j}$, $j \ge 0$, react to $r_k$ (at $j = 0$ already for a controller
+    acting within the sample, the usual case). Lag 0 assumes no direct
+    feedthrough within a sample (a sampled physical plant, held input: $y_k$ is
+    measured before $v_k$ acts).
+
+    The input is prewhitened by a least-squares AR(`order`) model
+    $A(q)v = \varepsilon$ and $r$ is filtered by the same $A(q)$, which leaves a
+    model error $G'(q)v$ as $G'(q)\varepsilon$ (past and present $\varepsilon$
+    only); then $\rho_j = \mathrm{corr}(A r_k, \varepsilon_{k+j})$, $j = 1..$
+    `max_lag`, is about $N(0, 1/N)$ under open loop, and feedback is reported
+    when $\max_j |\rho_j|\sqrt{N}$ exceeds the two-sided Bonferroni quantile at
+    `alpha` over the lags (false-alarm rate $\le$ `alpha`). Not applicable to an
+    exactly periodic input (its future is its past): `applicable` is then False.
+    """
+    r = np.asarray(r, float) - np.mean(r)
+    v = np.asarray(v, float) - np.mean(v)
+    n = v.shape[0]
+    if n < 4 * (order + max_lag) or np.ptp(v) == 0:
+        return {"applicable": False, "why": "record too short or input constant"}
+    X = np.column_stack([v[order - i - 1 : n - i - 1] for i in range(order)])
+    coef, *_ = np.linalg.lstsq(X, v[order:], rcond=None)
+    eps = v[order:] - X @ coef
+    R = np.column_stack([r[order - i - 1 : n - i - 1] for i in range(order)])
+    rf = r[order:] - R @ coef
+    lags = np.arange(0, max_lag + 1)
+    rho = cross_correlation(rf, eps, lags)
+    z = float(np.max(np.abs(rho)) * math.sqrt(eps.shape[0]))
+    threshold = _bonferroni_z(alpha, lags.shape[0])
+    return {
+        "applicable": True,
+        "z": z,
+        "threshold": threshold,
+        "lag": int(lags[np.argmax(np.abs(rho))]),
+        "closed_loop": bool(z > threshold),
+    }

@@ -151,12 +151,37 @@ def load_model(source: str | os.PathLike | dict) -> tuple[Hammerstein, float | N
     return Hammerstein(nl, lin), dt
 
 
-def require_stable(plant: Hammerstein, name: str | os.PathLike) -> None:
+MAX_INTEGRATORS = 2  # a position axis driven by a force is a double integrator
+
+
+def integrating_only(linear) -> bool:
+    """Whether every pole of `linear` is stable except at most `MAX_INTEGRATORS`
+    integrators (z = 1 for a discrete block, s = 0 for a continuous one, to
+    rounding): a level loop or a position axis, which simulates from rest on a
+    finite record though it is not asymptotically stable."""
+    poles = np.asarray(linear.poles(), complex)
+    if isinstance(linear, ContinuousTransferFunction):
+        scale = max(float(np.max(np.abs(poles))) if poles.size else 1.0, 1.0)
+        at = np.abs(poles) <= 1e-9 * scale
+        inside = poles.real < 0
+    else:
+        at = np.abs(poles - 1.0) <= 1e-9
+        inside = np.abs(poles) < 1.0
+    return bool(np.all(at | inside) and np.sum(at) <= MAX_INTEGRATORS)
+
+
+def require_stable(
+    plant: Hammerstein, name: str | os.PathLike, *, integrating: bool = False
+) -> None:
     """Refuse a plant whose linear block is unstable, before anything simulates it:
     the check `hamjax.simulation.simulate` makes (`simulation.check_stable`), as a
-    `UserInputError` naming the file `name`."""
+    `UserInputError` naming the file `name`. `integrating=True` also accepts
+    integrators (`integrating_only`), for callers that simulate them (the
+    diagnosis)."""
     from ..simulation import check_stable
 
+    if integrating and integrating_only(plant.linear):
+        return
     try:
         check_stable(plant.linear, "the plant's linear block")
     except ValueError as err:

@@ -101,3 +101,31 @@ def test_saturation_biting_on_one_side_is_found():
     # the limits are recovered to a few noise-induced parts per thousand
     assert np.isclose(_param(d, "sat_lo"), lo, rtol=5e-3)
     assert np.isclose(_param(d, "sat_hi"), hi, rtol=5e-3)
+
+
+@pytest.mark.slow
+def test_an_integrating_nominal_is_diagnosed():
+    # A position axis B / ((1 - 0.6 q^-1)(1 - q^-1)) whose drive saturates at
+    # [-0.5, 0.6]; records from rest, zero-mean staircases, noise 1e-6: the
+    # integrating nominal is diagnosed like any other (saturation named, its
+    # levels recovered, the gap closed to the noise). Reference: scipy.
+    import scipy.signal
+
+    import hamjax as hj
+    from hamjax.papers.gap.demo_cases import staircase
+
+    dt = 0.01
+    b, a = np.array([0.0, 0.05]), np.convolve([1.0, -0.6], [1.0, -1.0])
+    nominal = hj.Hammerstein(hj.Identity(), hj.DiscreteTransferFunction(b, a, dt))
+    records = []
+    for i in range(2):
+        v = staircase(jr.key(40 + i), 600)
+        v = v - np.mean(v)
+        y = scipy.signal.lfilter(b, a, np.clip(v, -0.5, 0.6))
+        y = y + 1e-6 * np.asarray(jr.normal(jr.key(50 + i), y.shape))
+        records.append({"t": np.arange(600) * dt, "v": v, "y": y})
+    (d,) = diagnose_many([(nominal, dt, *records)])
+    assert d.effect == "saturation", (d.effect, d.tests)
+    assert np.isclose(_param(d, "sat_lo"), -0.5, rtol=1e-3)
+    assert np.isclose(_param(d, "sat_hi"), 0.6, rtol=1e-3)
+    assert d.gap_after < 1e-3 * d.gap_before

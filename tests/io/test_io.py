@@ -209,3 +209,22 @@ def test_a_backlash_with_a_negative_output_gain_round_trips(tmp_path):
     # tables of 121 points reproduce the tabulated borders exactly; the rest is
     # rounding of the ZOH of kG against G followed by k (a few ulps of |w|)
     assert float(jnp.max(jnp.abs(w - w_back))) <= 1e-12 * scale
+
+
+def test_integrators_are_accepted_only_where_asked():
+    from hamjax.io import require_stable
+    from hamjax.io.model_json import integrating_only
+
+    dt = 0.1
+    axis = hj.DiscreteTransferFunction([0.0, 0.1], np.convolve([1, -0.5], [1, -1]), dt)
+    double = hj.ContinuousTransferFunction([1.0], [2.0, 0.0, 0.0])
+    unstable = hj.DiscreteTransferFunction([0.0, 0.1], [1.0, -1.01], dt)
+    three = hj.DiscreteTransferFunction([0.0, 0.1], np.poly([1.0, 1.0, 1.0]), dt)
+    assert integrating_only(axis) and integrating_only(double)
+    assert not integrating_only(unstable) and not integrating_only(three)
+    plant = hj.Hammerstein(hj.Identity(), axis)
+    require_stable(plant, "model.json", integrating=True)
+    with pytest.raises(UserInputError, match="model.json: .*unstable"):
+        require_stable(plant, "model.json")
+    with pytest.raises(UserInputError, match="unstable"):
+        require_stable(hj.Hammerstein(hj.Identity(), unstable), "m", integrating=True)

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from hamjax.diagnosis.case import read_case
-from hamjax.diagnosis.real_data import FROM_REST, real_cases, write_real_cases
+from hamjax.papers.gap.real_data import from_rest, real_cases, write_real_cases
 
 
 EXPECTED = (
@@ -64,7 +64,7 @@ def test_hsm150_starts_at_rest_and_steps_once(cases, tmp_path):
         assert np.unique(rec["v"]).shape[0] == 2  # operating point, then the step
     write_real_cases(_shared_real(), tmp_path, stiction_loops=0)
     hsm = read_case(tmp_path / "hsm150_pos")
-    assert "hsm150_pos".startswith(FROM_REST)
+    assert from_rest(est, val)  # decided from the records, not the name
     # uncentred; fixed data (no key), and the only error is the write/read round trip
     np.testing.assert_allclose(hsm.estimation["y"], est["y"], rtol=1e-12)
     tanks = read_case(tmp_path / "cascaded_tanks")
@@ -75,3 +75,30 @@ def _shared_real():
     from conftest import SHARED
 
     return SHARED / "data" / "real"
+
+
+def test_ced_estimates_on_the_larger_prbs_and_validates_on_the_smaller(cases):
+    # SOURCE.md: record 2 is the +-1.5 PRBS, record 1 the +-1.0 one; the sensor
+    # is sign-blind, so every output sample is >= 0
+    est, val, _ = cases["ced_prbs"]
+    np.testing.assert_allclose(np.max(np.abs(est["v"])), 1.5, rtol=0.02)
+    np.testing.assert_allclose(np.max(np.abs(val["v"])), 1.0, rtol=0.02)
+    assert est["v"].shape[0] == val["v"].shape[0] == 500
+    assert np.min(est["y"]) >= 0 and np.min(val["y"]) >= 0
+
+
+def test_silverbox_splits_the_multisine_part_75_25(cases):
+    est, val, _ = cases["silverbox"]
+    n = 127400 - 40650
+    assert est["v"].shape[0] == (3 * n) // 4
+    assert est["v"].shape[0] + val["v"].shape[0] == n
+
+
+def test_from_rest_is_read_off_the_records():
+    t = np.arange(100.0)
+    step = np.where(t < 10, 0.0, 1.0 - np.exp(-(t - 10) / 5))
+    at_rest = {"t": t, "v": np.where(t < 10, 0.3, 0.6), "y": step}
+    moving = {"t": t, "v": at_rest["v"], "y": step + 0.2}
+    assert from_rest(at_rest, at_rest)
+    # either record not starting at zero output: centred
+    assert not from_rest(at_rest, moving) and not from_rest(moving, at_rest)

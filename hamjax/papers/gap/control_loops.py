@@ -231,7 +231,7 @@ def _physics(rng, kind: str, dt: float) -> tuple[dict, int]:
     whole samples, 0 up to what keeps the nominal's order within MAX_ORDER."""
     u = rng.uniform
     poles = 1 if kind == "fopdt" else 2
-    delay = int(rng.integers(0, MAX_ORDER - poles))
+    delay = int(rng.integers(0, MAX_ORDER - poles + 1))
     if kind == "fopdt":
         return {"K": u(0.5, 3.0), "tau": u(10, 60) * dt}, delay
     if kind == "sopdt":

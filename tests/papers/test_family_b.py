@@ -2,30 +2,17 @@
 
 import hashlib
 import json
-import subprocess
-import sys
 from collections import Counter
 from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import run_hamjax, tree_hash
 
 from hamjax.diagnosis.case import read_case
 from hamjax.io import load_model, read_json, write_json
 from hamjax.papers.gap import family_b as fb
 from hamjax.papers.gap.blind import TRUTH_CLASSES
-
-
-ROOT = Path(__file__).resolve().parents[2]
-
-
-def _tree_hash(folder: Path) -> str:
-    h = hashlib.sha256()
-    for p in sorted(Path(folder).rglob("*")):
-        if p.is_file():
-            h.update(str(p.relative_to(folder)).encode())
-            h.update(p.read_bytes())
-    return h.hexdigest()
 
 
 @pytest.fixture(scope="module")
@@ -88,7 +75,7 @@ def test_cases_are_valid_gap_case_folders(bench):
 def test_same_seed_same_files_and_cases_independent_of_count(bench, tmp_path):
     out, _ = bench
     again = fb.make_cases(0, 12, tmp_path / "again", classes="twelve")
-    assert _tree_hash(out) == _tree_hash(tmp_path / "again")
+    assert tree_hash(out) == tree_hash(tmp_path / "again")
     assert again == read_json(out / "truth.json")
     fewer = fb.make_cases(0, 3, tmp_path / "fewer", classes="twelve")
     for name in fewer["cases"]:
@@ -186,7 +173,7 @@ FAMILY_B_TWELVE_HASH = (
 
 
 def test_family_b_twelve_reproduces_the_twelve_class_sets(tmp_path):
-    r = _cli(
+    r = run_hamjax(
         "blind",
         "make",
         "--family",
@@ -216,7 +203,7 @@ FAMILY_A_HASH = {
 @pytest.mark.parametrize("realism", ["exact", "realistic"])
 def test_family_a_unchanged(realism, tmp_path):
     out = tmp_path / "A"
-    r = _cli(
+    r = run_hamjax(
         "blind",
         "make",
         "--cases",
@@ -231,7 +218,7 @@ def test_family_a_unchanged(realism, tmp_path):
     assert r.returncode == 0, r.stderr
     assert _numeric_hash(out) == FAMILY_A_HASH[realism]
     # --family A is the default
-    r = _cli(
+    r = run_hamjax(
         "blind",
         "make",
         "--family",
@@ -249,22 +236,8 @@ def test_family_a_unchanged(realism, tmp_path):
     assert _numeric_hash(tmp_path / "A2") == FAMILY_A_HASH[realism]
 
 
-def _cli(*args, cwd=ROOT):
-    return subprocess.run(
-        [sys.executable, "-m", "hamjax", *args],
-        capture_output=True,
-        text=True,
-        cwd=cwd,
-        env={
-            "PYTHONPATH": str(ROOT),
-            "PATH": "/usr/bin:/bin",
-            "HAMJAX_CACHE_DIR": "off",
-        },
-    )
-
-
 def test_cli_blind_make_family_b(tmp_path):
-    r = _cli(
+    r = run_hamjax(
         "blind",
         "make",
         "--family",
@@ -282,29 +255,13 @@ def test_cli_blind_make_family_b(tmp_path):
     assert truth["family"] == "B" and len(truth["cases"]) == 2
     direct = fb.make_cases(4, 2, tmp_path / "direct")
     assert truth == direct
-    r = _cli(
-        "blind",
-        "make",
-        "--family",
-        "B",
-        "--realism",
-        "exact",
-        "--cases",
-        "2",
-        "--out",
-        str(tmp_path / "X"),
-    )
-    assert r.returncode == 2 and "family A only" in r.stderr
-    assert not (tmp_path / "X").exists()
-    r = _cli(
-        "blind",
-        "make",
-        "--classes",
-        "twelve",
-        "--cases",
-        "2",
-        "--out",
-        str(tmp_path / "Y"),
-    )
-    assert r.returncode == 2 and "family B only" in r.stderr
-    assert not (tmp_path / "Y").exists()
+    refused = {  # options of another family: exit 2, nothing written
+        "X": (("--family", "B", "--realism", "exact"), "family A only"),
+        "Y": (("--classes", "twelve"), "family B only"),
+    }
+    for out, (opts, message) in refused.items():
+        r = run_hamjax(
+            "blind", "make", *opts, "--cases", "2", "--out", str(tmp_path / out)
+        )
+        assert r.returncode == 2 and message in r.stderr
+        assert not (tmp_path / out).exists()

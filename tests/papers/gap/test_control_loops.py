@@ -1,13 +1,10 @@
 """The control-loop benchmark (papers/gap/control_loops.py, issue 19)."""
 
-import hashlib
-import subprocess
-import sys
 from collections import Counter
-from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import run_hamjax, tree_hash
 from scipy import signal
 
 from hamjax.diagnosis.case import read_case
@@ -15,15 +12,6 @@ from hamjax.diagnosis.layout import N_MAX
 from hamjax.io import load_model, read_json, write_json
 from hamjax.papers.gap import control_loops as cl
 from hamjax.papers.gap.blind import STICTION_LIKE, TRUTH_CLASSES, format_score, score
-
-
-def _tree_hash(folder: Path) -> str:
-    h = hashlib.sha256()
-    for p in sorted(Path(folder).rglob("*")):
-        if p.is_file():
-            h.update(str(p.relative_to(folder)).encode())
-            h.update(p.read_bytes())
-    return h.hexdigest()
 
 
 # ------------------------------------------------------------ stiction ------
@@ -243,7 +231,7 @@ def test_case_independent_of_the_count_and_deterministic(loops, tmp_path):
             assert a == (out / "cases" / name / f).read_bytes()
         assert fewer["cases"][name] == truth["cases"][name]
     again = cl.make_cases(0, 3, tmp_path / "again")
-    assert _tree_hash(tmp_path / "again") == _tree_hash(tmp_path / "fewer")
+    assert tree_hash(tmp_path / "again") == tree_hash(tmp_path / "fewer")
     assert again == fewer
     assert cl.make_cases(1, 3, tmp_path / "other")["cases"] != fewer["cases"]
 
@@ -283,24 +271,9 @@ def test_stiction_scores():
     assert score(truth, names)["stiction"] is None
 
 
-def _cli(*args):
-    root = Path(__file__).resolve().parents[3]
-    return subprocess.run(
-        [sys.executable, "-m", "hamjax", *args],
-        capture_output=True,
-        text=True,
-        cwd=root,
-        env={
-            "PYTHONPATH": str(root),
-            "PATH": "/usr/bin:/bin",
-            "HAMJAX_CACHE_DIR": "off",
-        },
-    )
-
-
 def test_cli_make_and_score_loops(tmp_path):
     out = tmp_path / "L"
-    r = _cli(
+    r = run_hamjax(
         "blind",
         "make",
         "--family",
@@ -321,7 +294,7 @@ def test_cli_make_and_score_loops(tmp_path):
             res / name / "diagnosis.json",
             {"effect": tr["effect"], "gap_before": 1.0, "gap_after": 1.0},
         )
-    r = _cli("blind", "score", str(out), str(res))
+    r = run_hamjax("blind", "score", str(out), str(res))
     assert r.returncode == 0, r.stderr
     assert "stiction: recall" in r.stdout
     s = read_json(res / "score.json")
@@ -329,7 +302,7 @@ def test_cli_make_and_score_loops(tmp_path):
         s["accuracy"] == 1.0
         and s["stiction"]["n_stiction"] + s["stiction"]["n_without"] == 2
     )
-    r = _cli(
+    r = run_hamjax(
         "blind",
         "make",
         "--family",

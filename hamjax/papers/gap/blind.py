@@ -613,12 +613,13 @@ def format_score(s: dict) -> str:
     """The confusion matrix and the headline numbers as text."""
     labels = list(TRUTH_CLASSES) + ["unexplained"]
     short = [x[:6] for x in labels]
-    lines = ["truth \\ named".ljust(20) + " ".join(f"{x:>6}" for x in short)]
+    width = max(len(t) for t in TRUTH_CLASSES) + 1
+    lines = ["truth \\ named".ljust(width) + " ".join(f"{x:>6}" for x in short)]
     for t in TRUTH_CLASSES:
         row = s["confusion"][t]
         if sum(row.values()) == 0:
             continue
-        lines.append(t.ljust(20) + " ".join(f"{row[p]:>6}" for p in labels))
+        lines.append(t.ljust(width) + " ".join(f"{row[p]:>6}" for p in labels))
     lines.append(
         f"cases {s['n_cases']}  accuracy {s['accuracy']:.3f}  false alarm on none "
         f"{s['false_alarm_none']:.3f} (of {s['n_none']})  median shrink (deterministic) "

@@ -76,7 +76,7 @@ class ChoudhuryStiction:
     start (no direction yet), the first motion must cross S.
     """
 
-    def __init__(self, S: float, J: float, x0: float = 0.0):
+    def __init__(self, S: float, J: float, *, x0: float = 0.0):
         self.S, self.J = float(S), float(J)
         self.y, self.x_prev, self.x_ss = float(x0), float(x0), float(x0)
         self.direction, self.stuck = 0.0, True
@@ -110,7 +110,7 @@ class HeStiction:
     position is y_k = x_k - u_r.
     """
 
-    def __init__(self, fs: float, fd: float, x0: float = 0.0):
+    def __init__(self, fs: float, fd: float, *, x0: float = 0.0):
         self.fs, self.fd = float(fs), float(fd)
         self.u_r, self.x_prev = 0.0, float(x0)
 
@@ -152,7 +152,7 @@ def discrete_process(num, den, dt: float, delay: int) -> tuple[np.ndarray, np.nd
     return b, np.real(a)
 
 
-def simc_pi(kind: str, p: dict, delay: int, dt: float, detune: float) -> dict:
+def simc_pi(kind: str, p: dict, delay: int, dt: float, *, detune: float) -> dict:
     """PI settings by the SIMC rules (Skogestad 2003, J. Process Control 13, 291-309,
     Eqs. 21-22 and the half rule) from the true process: closed-loop time constant
     tau_c = detune x the effective delay theta (the dead time, the lag of the second
@@ -172,7 +172,7 @@ def simc_pi(kind: str, p: dict, delay: int, dt: float, detune: float) -> dict:
     return {"Kc": tau / (gain * (tc + theta)), "Ti": min(tau, 4 * (tc + theta))}
 
 
-def simulate_loop(b, a, pi: dict, dt: float, sp, d, e, valve=None) -> dict:
+def simulate_loop(b, a, pi: dict, dt: float, sp, d, e, *, valve=None) -> dict:
     """The loop, sample by sample from rest: PV_k = B/A x_k + d_k + e_k, the PI in
     velocity form OP_k = OP_{k-1} + Kc (err_k - err_{k-1} + dt/Ti err_k),
     err = SP - PV, and the valve position x_k = valve(OP_k) (OP itself without
@@ -287,7 +287,7 @@ def _draw(rng, label: str, stiction: str | None) -> dict | None:
     p, delay = _physics(rng, kind, dt)
     n = int(rng.integers(N_SAMPLES[0], N_SAMPLES[1] + 1))
     b, a = discrete_process(*process_tf(kind, p), dt, delay)
-    pi = simc_pi(kind, p, delay, dt, rng.uniform(1.0, 3.0))
+    pi = simc_pi(kind, p, delay, dt, detune=rng.uniform(1.0, 3.0))
     pi["Kc"] *= rng.uniform(0.8, 1.25)  # the detuning an engineer leaves
     step = rng.uniform(1.0, 5.0)  # setpoint step, % of the PV span
     sigma = rng.uniform(0.01, 0.1) * step
@@ -317,7 +317,7 @@ def _draw(rng, label: str, stiction: str | None) -> dict | None:
                 sp,
                 ratio * noise_std * d,
                 noise_std * e,
-                make_valve(valve_truth),
+                valve=make_valve(valve_truth),
             )
         return out
 

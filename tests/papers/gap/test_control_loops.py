@@ -118,7 +118,7 @@ def test_loop_closes_without_stiction(kind):
     dt = 5.0
     p, delay = cl._physics(rng, kind, dt)
     b, a = cl.discrete_process(*cl.process_tf(kind, p), dt, delay)
-    pi = cl.simc_pi(kind, p, delay, dt, 2.0)
+    pi = cl.simc_pi(kind, p, delay, dt, detune=2.0)
     n = 8000
     sp = np.where(np.arange(n) < 4000, 2.0, -1.0)
     lp = cl.simulate_loop(b, a, pi, dt, sp, np.zeros(n), np.zeros(n))
@@ -139,11 +139,11 @@ def test_stiction_makes_an_integrating_loop_cycle(model):
     dt = 1.0
     p, delay = cl._physics(rng, "integrating", dt)
     b, a = cl.discrete_process(*cl.process_tf("integrating", p), dt, delay)
-    pi = cl.simc_pi("integrating", p, delay, dt, 1.5)
+    pi = cl.simc_pi("integrating", p, delay, dt, detune=1.5)
     n = 8000
     sp, zero = np.ones(n), np.zeros(n)
     st = {"model": model, "S": 2.0, "J": 0.5, "fs": 1.25, "fd": 0.75}
-    lp = cl.simulate_loop(b, a, pi, dt, sp, zero, zero, cl.make_valve(st))
+    lp = cl.simulate_loop(b, a, pi, dt, sp, zero, zero, valve=cl.make_valve(st))
     free = cl.simulate_loop(b, a, pi, dt, sp, zero, zero)
     err = lp["pv"] - sp
     late, mid = err[6000:], err[4000:6000]

@@ -81,3 +81,36 @@ def run_on_two_devices(script: str, tmp_path, *, timeout: float = 600):
     )
     assert proc.returncode == 0, proc.stderr[-3000:]
     return np.load(out)
+
+
+def tree_hash(folder) -> str:
+    """sha256 of every file's relative path and bytes below `folder`, in order."""
+    import hashlib
+    from pathlib import Path
+
+    h = hashlib.sha256()
+    for p in sorted(Path(folder).rglob("*")):
+        if p.is_file():
+            h.update(str(p.relative_to(folder)).encode())
+            h.update(p.read_bytes())
+    return h.hexdigest()
+
+
+def run_hamjax(*args):
+    """`python -m hamjax ARGS` from the repository root, in a clean environment."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    return subprocess.run(
+        [sys.executable, "-m", "hamjax", *args],
+        capture_output=True,
+        text=True,
+        cwd=root,
+        env={
+            "PYTHONPATH": str(root),
+            "PATH": "/usr/bin:/bin",
+            "HAMJAX_CACHE_DIR": "off",
+        },
+    )

@@ -28,15 +28,25 @@ def register(sub) -> None:
         "--realism",
         choices=("exact", "realistic"),
         default=None,
-        help="family A only (default exact); family B is physical by construction",
+        help="family A only (default exact); families B and loops are physical by "
+        "construction",
     )
     m.add_argument(
         "--family",
-        choices=("A", "B"),
+        choices=("A", "B", "loops"),
         default="A",
         help="A: the catalogue's formulas (papers/gap/blind.py, default); B: physical "
         "plants written independently of them (papers/gap/family_b.py, docs/family-b.md), "
-        "the held-out family no constant of the diagnosis is chosen on",
+        "the held-out family no constant of the diagnosis is chosen on; loops: PI "
+        "control loops with and without valve stiction, OP -> PV "
+        "(papers/gap/control_loops.py, docs/control-loops.md), held out as B",
+    )
+    m.add_argument(
+        "--classes",
+        choices=("fourteen", "twelve"),
+        default=None,
+        help="family B only: the 14 classes (default) or the 12 of its first version "
+        "(no friction, no feedback nonlinearity: its sets exactly)",
     )
     m.add_argument("--out", type=Path, required=True)
     m.add_argument(
@@ -71,17 +81,27 @@ def _check_make_out(out: Path, force: bool) -> list[Path]:
 def run_make(args: argparse.Namespace) -> int:
     from ._outputs import remove_files
 
-    if args.family == "B" and args.realism is not None:
+    if args.family != "A" and args.realism is not None:
         raise UserInputError(
-            "--realism applies to family A only (family B is physical by construction)"
+            f"--realism applies to family A only (family {args.family} is physical by "
+            "construction)"
         )
+    if args.family != "B" and args.classes is not None:
+        raise UserInputError("--classes applies to family B only")
     earlier = _check_make_out(args.out, args.force)
     remove_files(earlier, args.out)
     if args.family == "B":
         from ..papers.gap.family_b import make_cases as make_cases_b
 
-        truth = make_cases_b(args.seed, args.cases, args.out)
+        truth = make_cases_b(
+            args.seed, args.cases, args.out, classes=args.classes or "fourteen"
+        )
         print(f"wrote {len(truth['cases'])} family-B cases to {args.out / 'cases'}")
+    elif args.family == "loops":
+        from ..papers.gap.control_loops import make_cases as make_cases_loops
+
+        truth = make_cases_loops(args.seed, args.cases, args.out)
+        print(f"wrote {len(truth['cases'])} control-loop cases to {args.out / 'cases'}")
     else:
         import jax.random as jr
 

@@ -2,48 +2,41 @@
 
 import hashlib
 import json
-import subprocess
-import sys
 from collections import Counter
 from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import run_hamjax, tree_hash
 
 from hamjax.diagnosis.case import read_case
 from hamjax.io import load_model, read_json, write_json
 from hamjax.papers.gap import family_b as fb
-from hamjax.papers.gap.blind import EFFECTS
-
-
-ROOT = Path(__file__).resolve().parents[2]
-
-
-def _tree_hash(folder: Path) -> str:
-    h = hashlib.sha256()
-    for p in sorted(Path(folder).rglob("*")):
-        if p.is_file():
-            h.update(str(p.relative_to(folder)).encode())
-            h.update(p.read_bytes())
-    return h.hexdigest()
+from hamjax.papers.gap.blind import TRUTH_CLASSES
 
 
 @pytest.fixture(scope="module")
 def bench(tmp_path_factory):
     out = tmp_path_factory.mktemp("family_b")
-    truth = fb.make_cases(0, 12, out)
+    truth = fb.make_cases(0, 12, out, classes="twelve")
     return out, truth
 
 
-def test_classes_are_the_contracts_and_balanced():
-    assert set(fb.CLASSES) <= set(EFFECTS)
-    assert len(fb.CLASSES) == 12
-    labels = fb.classes_for(0, 240)
+@pytest.mark.parametrize("classes", ["fourteen", "twelve"])
+def test_classes_are_the_contracts_and_balanced(classes):
+    names = fb.CLASS_SETS[classes]
+    assert set(names) <= set(TRUTH_CLASSES)
+    assert len(names) == len(set(names)) == {"fourteen": 14, "twelve": 12}[classes]
+    labels = fb.classes_for(0, 20 * len(names), classes=classes)
     counts = Counter(labels)
-    assert set(counts) == set(fb.CLASSES)
+    assert set(counts) == set(names)
     assert set(counts.values()) == {20}
-    # every block of 12 is a permutation: every class appears in any 12 cases
-    assert set(fb.classes_for(5, 12)) == set(fb.CLASSES)
+    # every block of K is a permutation: every class appears in any aligned K cases
+    for b in range(3):
+        block = fb.classes_for(5, 3 * len(names), classes=classes)[
+            b * len(names) : (b + 1) * len(names)
+        ]
+        assert sorted(block) == sorted(names)
 
 
 def test_cases_are_valid_gap_case_folders(bench):
@@ -64,7 +57,7 @@ def test_cases_are_valid_gap_case_folders(bench):
         assert case.model is not None
         tr = truth["cases"][name]
         seen.add(tr["effect"])
-        assert tr["effect"] in fb.CLASSES and tr["noise_std"] > 0
+        assert tr["effect"] in fb.TWELVE and tr["noise_std"] > 0
         n = case.estimation["t"].shape[0]
         assert fb.N_SAMPLES[0] <= n <= fb.N_SAMPLES[1] == 4000
         assert np.isclose(case.dt, fb.DT[tr["plant"]])
@@ -76,20 +69,20 @@ def test_cases_are_valid_gap_case_folders(bench):
             )
         if tr["effect"] != "parameter_mismatch":  # SNR range (pm may pass 40 dB)
             assert 10.0 - 1e-6 <= tr["snr_db"] <= 40.0 + 1e-6
-    assert seen == set(fb.CLASSES)
+    assert seen == set(fb.TWELVE)
 
 
 def test_same_seed_same_files_and_cases_independent_of_count(bench, tmp_path):
     out, _ = bench
-    again = fb.make_cases(0, 12, tmp_path / "again")
-    assert _tree_hash(out) == _tree_hash(tmp_path / "again")
+    again = fb.make_cases(0, 12, tmp_path / "again", classes="twelve")
+    assert tree_hash(out) == tree_hash(tmp_path / "again")
     assert again == read_json(out / "truth.json")
-    fewer = fb.make_cases(0, 3, tmp_path / "fewer")
+    fewer = fb.make_cases(0, 3, tmp_path / "fewer", classes="twelve")
     for name in fewer["cases"]:
         for f in ("model.json", "estimation.csv", "validation.csv"):
             a = (tmp_path / "fewer" / "cases" / name / f).read_bytes()
             assert a == (out / "cases" / name / f).read_bytes()
-    other = fb.make_cases(1, 3, tmp_path / "other")
+    other = fb.make_cases(1, 3, tmp_path / "other", classes="twelve")
     assert other["cases"] != fewer["cases"]
 
 
@@ -97,7 +90,7 @@ def test_none_cases_consistent_with_nominal_within_noise(tmp_path):
     from hamjax.simulation.discrete import simulate
 
     checked = 0
-    for i, cause in enumerate(fb.classes_for(2, 36)):
+    for i, cause in enumerate(fb.classes_for(2, 42)):  # 3 blocks: 3 `none`
         if cause != "none":
             continue
         case = fb.make_case(2, i, cause)
@@ -171,6 +164,34 @@ def _rounded(obj):
     return obj
 
 
+# _numeric_hash of what `hamjax blind make --family B --cases 3 --seed 22` wrote with the
+# tree of commit 74d7c9d (12 classes, before friction and feedback_nonlinearity): the
+# `twelve` sets must not move (a dead zone, a backlash, an output nonlinearity).
+FAMILY_B_TWELVE_HASH = (
+    "0be9742893a3c7c52319f94d06588dcc77507f8f5da0ac86f8565f660c428bb7"
+)
+
+
+def test_family_b_twelve_reproduces_the_twelve_class_sets(tmp_path):
+    r = run_hamjax(
+        "blind",
+        "make",
+        "--family",
+        "B",
+        "--classes",
+        "twelve",
+        "--cases",
+        "3",
+        "--seed",
+        "22",
+        "--out",
+        str(tmp_path / "B12"),
+    )
+    assert r.returncode == 0, r.stderr
+    assert _numeric_hash(tmp_path / "B12") == FAMILY_B_TWELVE_HASH
+    assert "classes" not in read_json(tmp_path / "B12" / "truth.json")
+
+
 # _numeric_hash of what `hamjax blind make --cases 3 --seed 7 --realism R` writes, taken
 # with the tree of commit 7171ad5 (before family B): family A must not move.
 FAMILY_A_HASH = {
@@ -182,7 +203,7 @@ FAMILY_A_HASH = {
 @pytest.mark.parametrize("realism", ["exact", "realistic"])
 def test_family_a_unchanged(realism, tmp_path):
     out = tmp_path / "A"
-    r = _cli(
+    r = run_hamjax(
         "blind",
         "make",
         "--cases",
@@ -197,7 +218,7 @@ def test_family_a_unchanged(realism, tmp_path):
     assert r.returncode == 0, r.stderr
     assert _numeric_hash(out) == FAMILY_A_HASH[realism]
     # --family A is the default
-    r = _cli(
+    r = run_hamjax(
         "blind",
         "make",
         "--family",
@@ -215,22 +236,8 @@ def test_family_a_unchanged(realism, tmp_path):
     assert _numeric_hash(tmp_path / "A2") == FAMILY_A_HASH[realism]
 
 
-def _cli(*args, cwd=ROOT):
-    return subprocess.run(
-        [sys.executable, "-m", "hamjax", *args],
-        capture_output=True,
-        text=True,
-        cwd=cwd,
-        env={
-            "PYTHONPATH": str(ROOT),
-            "PATH": "/usr/bin:/bin",
-            "HAMJAX_CACHE_DIR": "off",
-        },
-    )
-
-
 def test_cli_blind_make_family_b(tmp_path):
-    r = _cli(
+    r = run_hamjax(
         "blind",
         "make",
         "--family",
@@ -248,17 +255,13 @@ def test_cli_blind_make_family_b(tmp_path):
     assert truth["family"] == "B" and len(truth["cases"]) == 2
     direct = fb.make_cases(4, 2, tmp_path / "direct")
     assert truth == direct
-    r = _cli(
-        "blind",
-        "make",
-        "--family",
-        "B",
-        "--realism",
-        "exact",
-        "--cases",
-        "2",
-        "--out",
-        str(tmp_path / "X"),
-    )
-    assert r.returncode == 2 and "family A only" in r.stderr
-    assert not (tmp_path / "X").exists()
+    refused = {  # options of another family: exit 2, nothing written
+        "X": (("--family", "B", "--realism", "exact"), "family A only"),
+        "Y": (("--classes", "twelve"), "family B only"),
+    }
+    for out, (opts, message) in refused.items():
+        r = run_hamjax(
+            "blind", "make", *opts, "--cases", "2", "--out", str(tmp_path / out)
+        )
+        assert r.returncode == 2 and message in r.stderr
+        assert not (tmp_path / out).exists()

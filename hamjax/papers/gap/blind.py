@@ -28,6 +28,7 @@ import jax.random as jr
 import numpy as np
 
 from ...diagnosis.attribute import DETERMINISTIC_NAMES, NOISE_NAMES
+from ...diagnosis.probabilities import CLASSES as CONTRACT_CLASSES
 from ...io import model_to_dict, write_case, write_json
 from ...models import (
     ContinuousTransferFunction,
@@ -43,6 +44,12 @@ from ...models.nonlinearities.piecewise_linear import piecewise_linear_map
 # The contract's names, in its order: none, the deterministic effects, the noise ones.
 EFFECTS = ("none", *DETERMINISTIC_NAMES, *NOISE_NAMES)
 DETERMINISTIC = DETERMINISTIC_NAMES
+# The truth classes a benchmark may hold: every contract name (family B draws
+# `friction` and `feedback_nonlinearity`, which the diagnosis does not try yet).
+TRUTH_CLASSES = tuple(c for c in CONTRACT_CLASSES if c != "unexplained")
+# Names that say "a valve sticks" on a control loop (docs/control-loops.md): the
+# contract's stiction class and the input-path effects a sticky valve resembles.
+STICTION_LIKE = ("backlash", "dead_zone", "preload", "friction")
 
 
 class _Draw:
@@ -529,8 +536,8 @@ def score(
     computed against the *true* noise std of the case); `confidences` maps case
     name -> the diagnosis's probability of the effect it named.
     """
-    labels = list(EFFECTS) + ["unexplained"]
-    matrix = {t: {p: 0 for p in labels} for t in EFFECTS}
+    labels = list(TRUTH_CLASSES) + ["unexplained"]
+    matrix = {t: {p: 0 for p in labels} for t in TRUTH_CLASSES}
     correct, total, none_total, none_alarm = 0, 0, 0, 0
     shrink_values = []
     missing = []
@@ -570,19 +577,49 @@ def score(
         if shrink_values
         else float("nan"),
         "confusion": matrix,
+        "stiction": stiction_score(truth, named)
+        if truth.get("family") == "loops"
+        else None,
+    }
+
+
+def stiction_score(truth: dict, named: dict) -> dict:
+    """The stiction question on a control-loop benchmark (truth `backlash` = a sticky
+    valve): recall (stiction loops named `backlash`), false-alarm rate (loops
+    without stiction named one of STICTION_LIKE) and balanced accuracy
+    (recall + 1 - false alarm) / 2, over the cases with a result."""
+    hit, n_st, alarm, n_free = 0, 0, 0, 0
+    for name, tr in truth["cases"].items():
+        if name not in named:
+            continue
+        if tr["effect"] == "backlash":
+            n_st += 1
+            hit += named[name] == "backlash"
+        else:
+            n_free += 1
+            alarm += named[name] in STICTION_LIKE
+    recall = hit / n_st if n_st else float("nan")
+    false_alarm = alarm / n_free if n_free else float("nan")
+    return {
+        "n_stiction": n_st,
+        "n_without": n_free,
+        "recall": recall,
+        "false_alarm": false_alarm,
+        "balanced_accuracy": (recall + 1 - false_alarm) / 2,
     }
 
 
 def format_score(s: dict) -> str:
     """The confusion matrix and the headline numbers as text."""
-    labels = list(EFFECTS) + ["unexplained"]
+    labels = list(TRUTH_CLASSES) + ["unexplained"]
     short = [x[:6] for x in labels]
-    lines = ["truth \\ named".ljust(20) + " ".join(f"{x:>6}" for x in short)]
-    for t in EFFECTS:
+    width = max(len(t) for t in TRUTH_CLASSES) + 1
+    lines = ["truth \\ named".ljust(width) + " ".join(f"{x:>6}" for x in short)]
+    for t in TRUTH_CLASSES:
         row = s["confusion"][t]
         if sum(row.values()) == 0:
             continue
-        lines.append(t.ljust(20) + " ".join(f"{row[p]:>6}" for p in labels))
+        lines.append(t.ljust(width) + " ".join(f"{row[p]:>6}" for p in labels))
     lines.append(
         f"cases {s['n_cases']}  accuracy {s['accuracy']:.3f}  false alarm on none "
         f"{s['false_alarm_none']:.3f} (of {s['n_none']})  median shrink (deterministic) "
@@ -597,6 +634,14 @@ def format_score(s: dict) -> str:
                 for b in s["calibration"]["bins"]
             )
             + ")"
+        )
+    if s.get("stiction"):
+        st = s["stiction"]
+        lines.append(
+            f"stiction: recall {st['recall']:.3f} (of {st['n_stiction']})  false alarm "
+            f"{st['false_alarm']:.3f} (of {st['n_without']}; named one of "
+            f"{', '.join(STICTION_LIKE)})  balanced accuracy "
+            f"{st['balanced_accuracy']:.3f}"
         )
     if s["missing"]:
         lines.append(f"missing results: {len(s['missing'])}")

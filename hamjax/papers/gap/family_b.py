@@ -8,7 +8,8 @@ gearbox, a valve feeding a process) simulated in continuous time on a fine grid
 of mismatch (a gear dead band with contact dynamics, valve-stem stiction with a
 Karnopp/Stribeck friction state, spool overlap, amplifier rails with a soft knee,
 a stroking-speed limit, a slowly varying transport delay, a sensor lag, a sensor
-soft limit, thermal creep, 1/f noise, ...). The nominal model (`model.json`) is
+soft limit, thermal creep, 1/f noise, Coulomb/Stribeck friction on the motion, a
+hardening or clearance spring, a sign-blind speed sensor, ...). The nominal model (`model.json`) is
 what an engineer would write from the data sheet: the same physics with several
 parameters off together by 15-20 % in the structural cases, and close to the
 truth (output error <= 0.1 noise std) in the `none`, `drift` and
@@ -20,7 +21,9 @@ constant of the decision rule may ever be chosen on this family.
 Sizes: the SNR of the noise-free output is 10-40 dB; a structural effect is
 scaled so that its output RMS after a (linearised) best re-fit of the nominal
 structure is 0.3-2 x the noise std; records of 1000-4000 samples. Classes are
-balanced (each block of 12 cases is a permutation of the 12 classes).
+balanced (each block of 14 cases is a permutation of the 14 classes; `classes="twelve"`
+writes the sets of the twelve classes drawn before `friction` and
+`feedback_nonlinearity` were added, byte for byte).
 
 Deterministic given the seed: case i uses `numpy.random.default_rng([seed, i])`
 only, so case i does not depend on how many cases are made.
@@ -35,10 +38,10 @@ from scipy import linalg, signal
 from ...io import write_case, write_json
 
 
-# The contract's names (shared/contracts/gap-case.md) that family B draws: the
-# twelve classes `hamjax blind score` knows (friction / feedback_nonlinearity are
-# not drawn, docs/family-b.md says why).
-CLASSES = (
+# The contract's names (shared/contracts/gap-case.md) that family B draws. TWELVE:
+# the classes of the first version (no friction, no feedback nonlinearity), kept to
+# reproduce its sets exactly.
+TWELVE = (
     "none",
     "parameter_mismatch",
     "backlash",
@@ -52,7 +55,9 @@ CLASSES = (
     "drift",
     "coloured_noise",
 )
-STRUCTURAL = CLASSES[2:10]
+CLASSES = (*TWELVE, "friction", "feedback_nonlinearity")
+CLASS_SETS = {"fourteen": CLASSES, "twelve": TWELVE}
+STRUCTURAL = (*TWELVE[2:10], "friction", "feedback_nonlinearity")
 FINE = 8  # integration steps per sample
 SNR_DB = (10.0, 40.0)
 RATIO = (0.3, 2.0)  # effect RMS after a re-fit / noise std
@@ -75,6 +80,9 @@ PLANTS_FOR = {
     "output_nonlinearity": ALL_PLANTS,
     "drift": ALL_PLANTS,
     "coloured_noise": ALL_PLANTS,
+    # velocity output (motor speed) or position output (msd: a spring-returned axis)
+    "friction": ("motor", "msd"),
+    "feedback_nonlinearity": ("msd",),
 }
 DT = {  # sampling period of each plant, s
     "heater": 1.0,
@@ -463,6 +471,13 @@ class _Plant:
             ph = dict(ph, L=m * self.dt * ph["R"])
         if cause == "backlash" and p == "gear_dead_band":
             w = _gear(u, h, ph, m)
+        elif cause in ("friction", "feedback_nonlinearity"):
+            num, den = _tf(self.kind, ph)
+            if cause == "friction":
+                force = _friction_force(m, e)
+            else:
+                force = _spring_force(m, p, e, den[-1] / num[-1])
+            w = _axis(u, h, num, den, force, sticks=cause == "friction")
         else:
             num, den = _tf(self.kind, ph)
             w = _lsim(num, den, u, h)
@@ -476,6 +491,8 @@ class _Plant:
                 w = e["wc"] + L * np.tanh((w - e["wc"]) / L)
             elif p == "polynomial":
                 w = w + m * (e["b2"] * w**2 / W + e["b3"] * w**3 / W**2)
+            elif p == "sign_blind":  # a speed sensor without direction
+                w = np.abs(w)
             else:  # one-sided soft limit of the sensor range (top or bottom)
                 top, sd = e["top"] * (1 - min(m, 0.95)), e["side"]
                 w = w - sd * _softplus(sd * w - top, e["knee"] * W)
@@ -515,7 +532,8 @@ def _after_refit(S, d) -> float:
 # ----------------------------------------------------------- the case ----
 
 
-def _perturbed(ph: dict, kind: str, errors: dict, scale: float) -> dict:
+def perturbed(ph: dict, errors: dict, scale: float) -> dict:
+    """`ph` with each parameter of `errors` off by `scale` x its relative error."""
     out = dict(ph)
     for k, e in errors.items():
         out[k] = ph[k] * (1 + scale * e)
@@ -525,6 +543,12 @@ def _perturbed(ph: dict, kind: str, errors: dict, scale: float) -> dict:
 def _draw_errors(rng, kind: str, ph: dict) -> dict:
     """Relative errors of 2-4 physical parameters, 15-20 % each, signs correlated."""
     names = [k for k in UNCERTAIN[kind] if not (k == "tau2" and ph.get("tau2", 0) == 0)]
+    return draw_errors(rng, names)
+
+
+def draw_errors(rng, names: list[str]) -> dict:
+    """Relative errors of 2-4 of the parameters `names` (all when there are two),
+    15-20 % each, 70 % of them sharing a common sign (a data sheet's errors)."""
     k = int(rng.integers(2, min(4, len(names)) + 1))
     chosen = [names[i] for i in sorted(rng.choice(len(names), k, replace=False))]
     common = rng.choice((-1.0, 1.0))
@@ -535,7 +559,7 @@ def _draw_errors(rng, kind: str, ph: dict) -> dict:
     return errs
 
 
-def _shape_for(rng, cause: str, kind: str) -> str:
+def _shape_for(rng, cause: str, kind: str, extended: bool) -> str:
     options = {
         "backlash": {
             "servo_gear": ("gear_dead_band",),
@@ -569,8 +593,12 @@ def _shape_for(rng, cause: str, kind: str) -> str:
         "coloured_noise": ("arma", "flicker"),
         "parameter_mismatch": ("correlated_parameters",),
         "none": ("none",),
+        "friction": ("coulomb_stribeck",),
+        "feedback_nonlinearity": ("cubic_stiffness", "spring_clearance"),
     }
     choices = options.get(cause, {}).get(kind) or default[cause]
+    if extended and cause == "output_nonlinearity" and kind == "motor":
+        choices = (*choices, "sign_blind")  # a motor run in both directions
     return choices[int(rng.integers(len(choices)))]
 
 
@@ -583,10 +611,13 @@ MAG = {  # initial magnitude, bounds (units in _Plant.output)
     "time_delay": (2.0, 0.3, 15.0),  # samples
     "extra_pole": (2.0, 0.05, 60.0),  # samples
     "output_nonlinearity": (0.3, 0.005, 0.95),  # the upper bound per shape: m_hi
+    "friction": (0.05, 0.002, 0.8),  # static friction, x max|v| (input units)
+    # cubic: k3 W^3 / (k W); clearance: share of the stiffness behind it (m_hi)
+    "feedback_nonlinearity": (0.2, 0.005, 3.0),
 }
 
 
-def _effect_constants(rng, cause, shape, plant_v, w0, u0, vs):
+def _effect_constants(rng, cause, shape, plant_v, w0, u0, vs, speed):
     e: dict = {}
     if cause == "time_delay":
         e.update(
@@ -632,7 +663,83 @@ def _effect_constants(rng, cause, shape, plant_v, w0, u0, vs):
         )
         e["top"] = float(np.max(e["side"] * w0))
         e["m_hi"] = {"tanh_offset": 3.0, "polynomial": 1.0}.get(shape, 0.95)
+    elif cause == "friction":
+        V = float(np.quantile(np.abs(speed), 0.98))
+        e.update(
+            V=V,  # speed scale of the motion
+            fc_over_fs=rng.uniform(0.5, 0.9),  # Coulomb below static (Stribeck)
+            vstr=rng.uniform(0.02, 0.2) * V,  # Stribeck speed
+            visc=rng.uniform(0.0, 0.3),  # viscous part at speed V, x static
+        )
+    elif cause == "feedback_nonlinearity":
+        e["W"] = float(np.quantile(np.abs(w0), 0.98))
+        if shape == "spring_clearance":
+            e.update(gap=rng.uniform(0.2, 0.6) * e["W"], m_hi=0.9)
     return e
+
+
+def _axis(uf, h, num, den, force, *, sticks: bool):
+    """Response from rest of num/den (in s; order 1 or 2, constant numerator) to
+    u - f, the force f = force(x, s, drive) fed back from its state (input units; x
+    the output, s its velocity, s = x for order 1; drive = u less the spring). Exact
+    ZOH of the linear part over each fine step with f held. `sticks`: `force`
+    returns None to stick (s held at 0, the friction balancing the drive), and a
+    velocity that reverses within a step stops there."""
+    den = np.asarray(den, float)
+    b0 = float(np.atleast_1d(num)[-1]) / den[0]
+    den = den / den[0]
+    if den.shape[0] == 2:  # velocity output: s' + a0 s = b0 (u - f)
+        a = math.exp(-den[1] * h)
+        Ad, Bd = np.array([[a]]), np.array([(1 - a) * b0 / den[1]])
+        k_b = 0.0  # no spring
+    else:  # position output: x'' + a1 x' + a0 x = b0 (u - f)
+        M = linalg.expm(
+            np.array([[0.0, 1.0, 0.0], [-den[2], -den[1], b0], [0.0, 0.0, 0.0]]) * h
+        )
+        Ad, Bd = M[:2, :2], M[:2, 2]
+        k_b = den[2] / b0
+    x = np.zeros(Ad.shape[0])
+    out = np.empty(uf.shape[0])
+    for j, u in enumerate(uf.tolist()):
+        out[j] = x[0]
+        s = x[-1]
+        drive = u - k_b * x[0]
+        f = force(x[0], s, drive)
+        if f is None:  # stuck: the friction balances the drive
+            x[-1], f = 0.0, drive
+        x_new = Ad @ x + Bd * (u - f)
+        if sticks and s != 0.0 and x_new[-1] * s < 0:
+            x_new[-1] = 0.0
+        x = x_new
+    return out
+
+
+def _friction_force(m, e):
+    """Coulomb + Stribeck + viscous friction (static level m), Karnopp sticking:
+    stuck at s = 0 while the drive stays within the static level."""
+    fc, fs, vstr, visc = m * e["fc_over_fs"], m, e["vstr"], m * e["visc"] / e["V"]
+
+    def force(x, s, drive):
+        if s == 0.0:
+            if abs(drive) <= fs:
+                return None
+            return math.copysign(fs, drive)
+        return (fc + (fs - fc) * math.exp(-((s / vstr) ** 2))) * math.copysign(
+            1.0, s
+        ) + visc * s
+
+    return force
+
+
+def _spring_force(m, shape, e, k_over_b):
+    """Spring force beyond the nominal's linear k x (input units): a cubic
+    hardening k3 x^3 (k3 W^3 = m k W) or, behind a clearance of half-width `gap`, a
+    share m of the stiffness that acts only outside it."""
+    W = e["W"]
+    if shape == "cubic_stiffness":
+        return lambda x, s, drive: m * k_over_b * x**3 / W**2
+    g = e["gap"]
+    return lambda x, s, drive: -m * k_over_b * min(max(x, -g), g)
 
 
 def _drift_shape(rng, shape, n, dt):
@@ -674,15 +781,16 @@ def _coloured(rng, shape, n):
     return x / _rms(x)
 
 
-def make_case(seed: int, index: int, cause: str) -> dict:
+def make_case(seed: int, index: int, cause: str, *, classes: str = "fourteen") -> dict:
     """Case `index` of the seed's family-B benchmark, with the physical cause `cause`.
 
     A draw whose cause does not show (or that fails a sanity check) is drawn again
-    from `default_rng([seed, index, attempt])`.
+    from `default_rng([seed, index, attempt])`. `classes="twelve"`: the draws of the
+    twelve-class version (no sign-blind sensor among the output nonlinearities).
     """
     for attempt in range(50):
         rng = np.random.default_rng([seed, index] + ([attempt] if attempt else []))
-        case = _draw(rng, cause)
+        case = _draw(rng, cause, extended=classes != "twelve")
         if case is not None:
             return case
     raise RuntimeError(
@@ -690,12 +798,43 @@ def make_case(seed: int, index: int, cause: str) -> dict:
     )  # pragma: no cover
 
 
-def _draw(rng, cause: str) -> dict | None:
+def _forward_bias(plant: _Plant, recs: dict, snr: float, ratio: float) -> float:
+    """Forward drive b added to both records so that the sign-blind sensor's effect
+    |w| - w after the linearised re-fit is `ratio` noise std (the noise std at the
+    SNR of the biased record): bisection, the effect falling as b grows. Linear in b:
+    w(v + b) = w(v) + b w(1), and so are the sensitivities."""
+    parts = {
+        r: (plant.output(v, None), plant.output(np.ones_like(v), None))
+        for r, v in recs.items()
+    }
+    sens = {
+        r: (_sensitivities(plant, v), _sensitivities(plant, np.ones_like(v)))
+        for r, v in recs.items()
+    }
+
+    def excess(b):  # effect / noise std - ratio
+        E = min(
+            _after_refit(sens[r][0] + b * sens[r][1], np.abs(w + b * w1) - w - b * w1)
+            for r, (w, w1) in parts.items()
+        )
+        w_est = parts["estimation"][0] + b * parts["estimation"][1]
+        return E / (_rms(w_est) / 10 ** (snr / 20)) - ratio
+
+    lo, hi = 0.0, 3.0 * float(max(np.max(np.abs(v)) for v in recs.values()))
+    if excess(lo) <= 0:
+        return 0.0
+    for _ in range(40):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if excess(mid) > 0 else (lo, mid)
+    return 0.5 * (lo + hi)
+
+
+def _draw(rng, cause: str, extended: bool = True) -> dict | None:
     plants = PLANTS_FOR[cause]
     kind = plants[int(rng.integers(len(plants)))]
     dt = DT[kind]
     ph = _draw_physics(rng, kind, dt)
-    shape = _shape_for(rng, cause, kind)
+    shape = _shape_for(rng, cause, kind, extended)
     n = int(rng.integers(N_SAMPLES[0], N_SAMPLES[1] + 1))
     (k_est, v_est), (k_val, v_val) = _excitation(rng, n), _excitation(rng, n)
     vs = float(max(np.max(np.abs(v_est)), np.max(np.abs(v_val))))
@@ -710,19 +849,33 @@ def _draw(rng, cause: str) -> dict | None:
     S = {r: _sensitivities(plant, v) for r, v in recs.items()}
     ratio = math.exp(rng.uniform(math.log(RATIO[0]), math.log(RATIO[1])))
     truth = {"plant": kind, "shape": shape, "dt": dt}
+    if shape == "sign_blind":  # run forward, reversing just enough to show
+        truth["forward_bias"] = bias = _forward_bias(plant, recs, snr, ratio)
+        recs = {r: v + bias for r, v in recs.items()}
+        v_est = recs["estimation"]
+        plant.vs = vs = float(max(np.max(np.abs(v)) for v in recs.values()))
+        w0 = {r: plant.output(v, None) for r, v in recs.items()}
+        u0 = plant.F(v_est)
+        sigma = _rms(w0["estimation"]) / 10 ** (snr / 20)
+        S = {r: _sensitivities(plant, v) for r, v in recs.items()}
     w = dict(w0)
     magnitude = None
     if cause in STRUCTURAL:
         plant.cause = cause
+        speed = w0["estimation"]  # the velocity: the output itself, or its derivative
+        if kind == "msd":
+            speed = np.gradient(speed, dt)
         plant.eff = _effect_constants(
-            rng, cause, shape, v_est, w0["estimation"], u0, vs
+            rng, cause, shape, v_est, w0["estimation"], u0, vs, speed
         )
         m0, lo, hi = MAG[cause]
         hi = plant.eff.pop("m_hi", hi)
         if cause == "backlash":
             m0, lo, hi = m0 * np.ptp(v_est), lo * np.ptp(v_est), hi * np.ptp(v_est)
-        elif cause == "dead_zone":
+        elif cause in ("dead_zone", "friction"):
             m0, lo, hi = m0 * vs, lo * vs, hi * vs
+        elif shape == "sign_blind":  # sized by the forward drive, not a magnitude
+            m0 = lo = hi = 1.0
         target = ratio * sigma
         m, hist = m0, []
         for _ in range(7):
@@ -767,7 +920,7 @@ def _draw(rng, cause: str) -> dict | None:
     errors = _draw_errors(rng, kind, ph)
 
     def nominal_gap(scale):  # the larger of the two records'
-        p_nom = _perturbed(ph, kind, errors, scale)
+        p_nom = perturbed(ph, errors, scale)
         return max(_rms(plant.linear_output(v, p_nom) - w0[r]) for r, v in recs.items())
 
     if cause in ("none", "drift", "coloured_noise"):
@@ -778,7 +931,7 @@ def _draw(rng, cause: str) -> dict | None:
                 break
             scale /= 2
         errors = {k: e * scale for k, e in errors.items()}
-    ph_nom = _perturbed(ph, kind, errors, 1.0)
+    ph_nom = perturbed(ph, errors, 1.0)
     gap_nominal = nominal_gap(1.0)
     if cause == "parameter_mismatch" and gap_nominal < 0.3 * sigma:
         sigma = gap_nominal / rng.uniform(
@@ -843,22 +996,29 @@ def _model_dict(plant: _Plant, ph_nom: dict) -> dict:
     return {"nonlinearity": nl, "linear": lin}
 
 
-def classes_for(seed: int, n_cases: int) -> list[str]:
-    """Balanced labels: block b of 12 cases is a permutation of CLASSES."""
+def classes_for(seed: int, n_cases: int, *, classes: str = "fourteen") -> list[str]:
+    """Balanced labels: block b of K cases is a permutation of the K classes of
+    `CLASS_SETS[classes]`."""
+    names = CLASS_SETS[classes]
     out: list[str] = []
-    for b in range((n_cases + len(CLASSES) - 1) // len(CLASSES)):
-        perm = np.random.default_rng([seed, 1_000_003, b]).permutation(len(CLASSES))
-        out.extend(CLASSES[i] for i in perm)
+    for b in range((n_cases + len(names) - 1) // len(names)):
+        perm = np.random.default_rng([seed, 1_000_003, b]).permutation(len(names))
+        out.extend(names[i] for i in perm)
     return out[:n_cases]
 
 
-def make_cases(seed: int, n_cases: int, out: Path) -> dict:
-    """Write `n_cases` family-B case folders under `out/cases/` and `out/truth.json`."""
+def make_cases(
+    seed: int, n_cases: int, out: Path, *, classes: str = "fourteen"
+) -> dict:
+    """Write `n_cases` family-B case folders under `out/cases/` and `out/truth.json`
+    (`classes`: "fourteen", or "twelve" for the sets of the twelve-class version)."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     truth = {"family": "B", "seed": int(seed), "realism": "physical", "cases": {}}
-    for i, cause in enumerate(classes_for(seed, n_cases)):
-        case = make_case(seed, i, cause)
+    if classes != "twelve":  # the twelve-class sets keep their truth.json exactly
+        truth["classes"] = classes
+    for i, cause in enumerate(classes_for(seed, n_cases, classes=classes)):
+        case = make_case(seed, i, cause, classes=classes)
         truth["cases"][write_case(out, i, case)] = case["truth"]
     write_json(out / "truth.json", truth)
     return truth

@@ -6,6 +6,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float
 
 from ..._checks import check_finite, concrete
+from ..._fields import float_field
 from ._base import AbstractContinuousLinearBlock, companion_roots
 from .state_space import DiscreteStateSpace
 
@@ -20,12 +21,8 @@ class ContinuousTransferFunction(AbstractContinuousLinearBlock):
     inputs (`hamjax.simulate_diffrax`).
     """
 
-    num: Float[Array, " m"]
-    den: Float[Array, " n"]
-
-    def __init__(self, num: Float[ArrayLike, " m"], den: Float[ArrayLike, " n"]):
-        self.num = jnp.asarray(num, dtype=float)
-        self.den = jnp.asarray(den, dtype=float)
+    num: Float[Array, " m"] = float_field()
+    den: Float[Array, " n"] = float_field()
 
     def __check_init__(self):
         if self.num.ndim != 1 or self.den.ndim != 1 or self.den.shape[0] < 1:

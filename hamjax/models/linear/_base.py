@@ -24,6 +24,20 @@ def companion_roots(tail: Float[Array, " n"], *, xp=jnp) -> Array:
     return xp.linalg.eigvals(companion)
 
 
+def rational_stable(den, num, *, continuous: bool, xp=jnp) -> Bool[Array, ""]:
+    r"""`stable()` of a rational block from its denominator `den` (highest power of
+    $s$, or of $z$, first) and numerator `num`: every coefficient finite and every
+    root of `den` in the stability region, $\mathrm{Re}\,p < 0$ (`continuous`) or
+    $|p| < 1$."""
+    den, num = xp.asarray(den), xp.asarray(num)
+    finite = xp.all(xp.isfinite(den)) & xp.all(xp.isfinite(num))
+    if den.shape[0] == 1:
+        return finite
+    roots = companion_roots(den[1:] / den[0], xp=xp)
+    inside = roots.real < 0.0 if continuous else xp.abs(roots) < 1.0
+    return xp.all(inside) & finite
+
+
 class AbstractLinearBlock(eqx.Module):
     """A stable, single-input single-output linear time-invariant block."""
 

@@ -7,7 +7,7 @@ from jaxtyping import Array, ArrayLike, Bool, Float
 
 from ..._checks import check_finite, concrete
 from ..._fields import float_field
-from ._base import AbstractContinuousLinearBlock, companion_roots
+from ._base import AbstractContinuousLinearBlock, rational_stable
 from .state_space import DiscreteStateSpace
 
 
@@ -55,12 +55,7 @@ class ContinuousTransferFunction(AbstractContinuousLinearBlock):
         return np.roots(den)
 
     def stable(self, *, xp=jnp) -> Bool[Array, ""]:
-        num, den = xp.asarray(self.num), xp.asarray(self.den)
-        finite = xp.all(xp.isfinite(den)) & xp.all(xp.isfinite(num))
-        if den.shape[0] == 1:
-            return finite
-        roots = companion_roots(den[1:] / den[0], xp=xp)
-        return xp.all(roots.real < 0.0) & finite
+        return rational_stable(self.den, self.num, continuous=True, xp=xp)
 
     def scaled(self, gain) -> "ContinuousTransferFunction":
         return ContinuousTransferFunction(self.num * gain, self.den)

@@ -8,7 +8,7 @@ from jaxtyping import Array, ArrayLike, Bool, Float
 
 from ..._checks import check_finite, concrete
 from ..._types import Signal
-from ._base import AbstractDiscreteLinearBlock, companion_roots
+from ._base import AbstractDiscreteLinearBlock, rational_stable
 
 
 class DiscreteTransferFunction(AbstractDiscreteLinearBlock):
@@ -78,12 +78,8 @@ class DiscreteTransferFunction(AbstractDiscreteLinearBlock):
         return np.roots(a) if a.shape[0] > 1 else np.zeros(0, complex)
 
     def stable(self, *, xp=jnp) -> Bool[Array, ""]:
-        a, b = xp.asarray(self.a), xp.asarray(self.b)
-        finite = xp.all(xp.isfinite(a)) & xp.all(xp.isfinite(b))
-        if a.shape[0] == 1:
-            return finite
-        roots = companion_roots(a[1:] / a[0], xp=xp)
-        return xp.all(xp.abs(roots) < 1.0) & finite
+        # A(q^-1) = 1 + a1 q^-1 + ...: its poles are the roots of z^n + a1 z^(n-1) + ...
+        return rational_stable(self.a, self.b, continuous=False, xp=xp)
 
     def scaled(self, gain) -> "DiscreteTransferFunction":
         return DiscreteTransferFunction(self.b * gain, self.a, self.dt)

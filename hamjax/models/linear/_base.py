@@ -69,7 +69,33 @@ class AbstractLinearBlock(eqx.Module):
 
 
 class AbstractDiscreteLinearBlock(AbstractLinearBlock):
-    """A linear block in discrete time (one step per sample)."""
+    """A linear block in discrete time (one step per sample).
+
+    `step` is the one sample of the block that `response` scans and that the
+    time-major simulation (`hamjax.simulation.time_major`) runs for a batch: the
+    input `u_k` may carry batch axes, the state then has them after its own axis.
+    """
+
+    @abc.abstractmethod
+    def zero_state(self, u: Float[Array, "*batch"]) -> Float[Array, " n *batch"]:
+        """The state at rest, for inputs shaped (and typed) like `u`."""
+
+    @abc.abstractmethod
+    def step(
+        self, state: Float[Array, " n *batch"], u: Float[Array, "*batch"]
+    ) -> tuple[Float[Array, " n *batch"], Float[Array, "*batch"]]:
+        """One sample: `(state, u_k) -> (next state, y_k)`."""
+
+
+def outer(
+    coefficients: Float[Array, " n"], u: Float[Array, "*batch"]
+) -> Float[Array, " n *batch"]:
+    """$c_i u$ for every coefficient $c_i$: the state axis first, then the batch
+    axes of `u` (none: the plain product)."""
+    u = jnp.asarray(u)
+    if u.ndim == 0:
+        return coefficients * u
+    return coefficients[(slice(None),) + (None,) * u.ndim] * u[None]
 
 
 class AbstractContinuousLinearBlock(AbstractLinearBlock):

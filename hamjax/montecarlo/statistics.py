@@ -61,6 +61,17 @@ class MonteCarloSummary(_Record):
     rmse_ci: Float[Array, "2 ..."]
 
 
+class LogLogSlope(_Record):
+    r"""Fit $\log e = c + p \log N$: slope $p$, its standard error and CI."""
+
+    slope: Float[Array, ""]
+    intercept: Float[Array, ""]
+    stderr: Float[Array, ""]
+    ci: Float[Array, "2"]
+    level: float = eqx.field(static=True)
+    method: str = eqx.field(static=True)
+
+
 def summarise(
     estimates: Float[ArrayLike, "realisations ..."],
     truth: Float[ArrayLike, "..."],
@@ -123,17 +134,6 @@ def summarise(
         realisations=R,
         level=level,
     )
-
-
-class LogLogSlope(_Record):
-    r"""Fit $\log e = c + p \log N$: slope $p$, its standard error and CI."""
-
-    slope: Float[Array, ""]
-    intercept: Float[Array, ""]
-    stderr: Float[Array, ""]
-    ci: Float[Array, "2"]
-    level: float = eqx.field(static=True)
-    method: str = eqx.field(static=True)
 
 
 def loglog_slope(

@@ -22,21 +22,18 @@ def run(key, out: Path) -> list[tuple[str, str]]:
     _, v1 = signals.nbbi_staircase(levels, hold=hold, dt=dt)
     v = jnp.concatenate([v0, v1])
     t = jnp.arange(v.shape[0]) * dt
-    w = simulation.simulate(plant, v, dt=dt)
-    y = hm.add_noise(noise000_key, w, hm.WhiteNoise(0.5))
-    fig = plot_input_output(
-        t,
-        v,
-        y,
-        w=w,
-        title="Backlash plant (s-10)/(s+1)^2: staircase experiment of NBBI, 4 levels",
-    )
-    fig.savefig(out / "seed000_staircase_io.png", dpi=110)
     made.append(
-        (
-            "seed000_staircase_io.png",
+        _input_output(
+            out / "seed000_staircase_io.png",
             "input (3)+(4a-b) and noisy output of the "
             "normalised Fig. 6 plant (analogue of seed 000 Fig. 6)",
+            noise000_key,
+            plant,
+            (t, v),
+            noise_std=0.5,
+            dt=dt,
+            title="Backlash plant (s-10)/(s+1)^2: staircase experiment of NBBI, "
+            "4 levels",
         )
     )
 
@@ -82,22 +79,31 @@ def run(key, out: Path) -> list[tuple[str, str]]:
 
     # Seed 001, Section V.C: PE impulse input (5.1).
     plant1, levels1, order = seed001_plant()
-    t2, v2 = signals.pe_impulse_sequence(levels1, order=order, periods=6)
-    w2 = simulation.simulate(plant1, v2)
-    y2 = hm.add_noise(noise001_key, w2, hm.WhiteNoise(0.1))
-    fig = plot_input_output(
-        t2,
-        v2,
-        y2,
-        w=w2,
-        title="Piecewise-linear plant: persistently exciting impulse input, 6 periods",
-    )
-    fig.savefig(out / "seed001_pe_io.png", dpi=110)
     made.append(
-        (
-            "seed001_pe_io.png",
+        _input_output(
+            out / "seed001_pe_io.png",
             "the persistently exciting input (5.1) and the "
             "output of the Section V.C plant",
+            noise001_key,
+            plant1,
+            signals.pe_impulse_sequence(levels1, order=order, periods=6),
+            noise_std=0.1,
+            dt=None,
+            title="Piecewise-linear plant: persistently exciting impulse input, "
+            "6 periods",
         )
     )
     return made
+
+
+def _input_output(
+    path: Path, caption: str, key, plant, tv, *, noise_std: float, dt, title: str
+) -> tuple[str, str]:
+    """Simulate `plant` on the input `tv = (t, v)`, add white noise of `noise_std`
+    drawn with `key`, and save the input/output figure at `path`: `(name, caption)`."""
+    t, v = tv
+    w = simulation.simulate(plant, v, dt=dt)
+    y = hm.add_noise(key, w, hm.WhiteNoise(noise_std))
+    fig = plot_input_output(t, v, y, w=w, title=title)
+    fig.savefig(path, dpi=110)
+    return path.name, caption

@@ -1,3 +1,7 @@
+"""The plant models: linear blocks, nonlinearities, noise and the Hammerstein plant."""
+
+from types import ModuleType as _ModuleType
+
 from .hammerstein import (
     Hammerstein as Hammerstein,
     normalise_static_gain as normalise_static_gain,
@@ -33,4 +37,12 @@ from .nonlinearities import (
     Shifted as Shifted,
     Tabulated as Tabulated,
     apply_nonlinearity as apply_nonlinearity,
+)
+
+
+# Every model name above: `hamjax/__init__.py` re-exports this list (one list).
+__all__ = sorted(
+    name
+    for name, value in globals().items()
+    if not name.startswith("_") and not isinstance(value, _ModuleType)
 )

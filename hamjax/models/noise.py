@@ -6,9 +6,10 @@ import equinox as eqx
 import jax.lax as lax
 import jax.numpy as jnp
 import jax.random as jr
-from jaxtyping import Array, ArrayLike, Float, PRNGKeyArray
+from jaxtyping import Array, Float, PRNGKeyArray
 
 from .._checks import concrete
+from .._fields import float_field
 from .._types import Signal
 
 
@@ -23,10 +24,7 @@ class AbstractNoise(eqx.Module):
 class WhiteNoise(AbstractNoise):
     """Zero-mean white Gaussian noise of standard deviation `std`."""
 
-    std: Float[Array, ""]
-
-    def __init__(self, std: Float[ArrayLike, ""]):
-        self.std = jnp.asarray(std, dtype=float)
+    std: Float[Array, ""] = float_field()
 
     def __check_init__(self):
         s = concrete(self.std)
@@ -40,12 +38,8 @@ class WhiteNoise(AbstractNoise):
 class AR1Noise(AbstractNoise):
     """Stationary AR(1) noise $e_k = p\\,e_{k-1} + \\varepsilon_k$ of marginal std `std`."""
 
-    std: Float[Array, ""]
-    pole: Float[Array, ""]
-
-    def __init__(self, std: Float[ArrayLike, ""], pole: Float[ArrayLike, ""]):
-        self.std = jnp.asarray(std, dtype=float)
-        self.pole = jnp.asarray(pole, dtype=float)
+    std: Float[Array, ""] = float_field()
+    pole: Float[Array, ""] = float_field()
 
     def __check_init__(self):
         p = concrete(self.pole)

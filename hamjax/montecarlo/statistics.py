@@ -14,6 +14,7 @@ Crowther, *Using simulation studies to evaluate statistical methods*, Stat. Med.
 Confidence intervals are Wald intervals, estimate $\pm z_{1-\alpha/2}$ MCSE.
 """
 
+import dataclasses
 import functools
 import math
 
@@ -26,32 +27,49 @@ from jax.scipy.special import betainc, ndtri
 from jaxtyping import Array, ArrayLike, Float, PRNGKeyArray
 
 
-class MonteCarloSummary(eqx.Module):
-    """Summary of $R$ estimates; every field has the shape of one estimate."""
-
-    mean: Float[Array, "..."]
-    bias: Float[Array, "..."]
-    std: Float[Array, "..."]
-    rmse: Float[Array, "..."]
-    mean_mcse: Float[Array, "..."]
-    bias_mcse: Float[Array, "..."]
-    std_mcse: Float[Array, "..."]
-    rmse_mcse: Float[Array, "..."]
-    mean_ci: Float[Array, "2 ..."]
-    bias_ci: Float[Array, "2 ..."]
-    std_ci: Float[Array, "2 ..."]
-    rmse_ci: Float[Array, "2 ..."]
-    realisations: int = eqx.field(static=True)
-    level: float = eqx.field(static=True)
+class _Record(eqx.Module):
+    """A summary whose `to_dict()` holds its fields in the order declared."""
 
     def to_dict(self) -> dict:
-        """JSON-able dict (lists of floats)."""
-        out: dict = {"realisations": self.realisations, "level": self.level}
-        for name in ("mean", "bias", "std", "rmse"):
-            out[name] = np.asarray(getattr(self, name)).tolist()
-            out[f"{name}_mcse"] = np.asarray(getattr(self, f"{name}_mcse")).tolist()
-            out[f"{name}_ci"] = np.asarray(getattr(self, f"{name}_ci")).tolist()
+        """JSON-able dict: arrays as (nested) lists of floats, the rest as is."""
+        out = {}
+        for field in dataclasses.fields(self):
+            value = getattr(self, field.name)
+            out[field.name] = (
+                np.asarray(value).tolist() if eqx.is_array(value) else value
+            )
         return out
+
+
+class MonteCarloSummary(_Record):
+    """Summary of $R$ estimates; every array has the shape of one estimate (the
+    intervals a leading axis of 2)."""
+
+    realisations: int = eqx.field(static=True)
+    level: float = eqx.field(static=True)
+    mean: Float[Array, "..."]
+    mean_mcse: Float[Array, "..."]
+    mean_ci: Float[Array, "2 ..."]
+    bias: Float[Array, "..."]
+    bias_mcse: Float[Array, "..."]
+    bias_ci: Float[Array, "2 ..."]
+    std: Float[Array, "..."]
+    std_mcse: Float[Array, "..."]
+    std_ci: Float[Array, "2 ..."]
+    rmse: Float[Array, "..."]
+    rmse_mcse: Float[Array, "..."]
+    rmse_ci: Float[Array, "2 ..."]
+
+
+class LogLogSlope(_Record):
+    r"""Fit $\log e = c + p \log N$: slope $p$, its standard error and CI."""
+
+    slope: Float[Array, ""]
+    intercept: Float[Array, ""]
+    stderr: Float[Array, ""]
+    ci: Float[Array, "2"]
+    level: float = eqx.field(static=True)
+    method: str = eqx.field(static=True)
 
 
 def summarise(
@@ -116,27 +134,6 @@ def summarise(
         realisations=R,
         level=level,
     )
-
-
-class LogLogSlope(eqx.Module):
-    r"""Fit $\log e = c + p \log N$: slope $p$, its standard error and CI."""
-
-    slope: Float[Array, ""]
-    intercept: Float[Array, ""]
-    stderr: Float[Array, ""]
-    ci: Float[Array, "2"]
-    level: float = eqx.field(static=True)
-    method: str = eqx.field(static=True)
-
-    def to_dict(self) -> dict:
-        return {
-            "slope": float(self.slope),
-            "intercept": float(self.intercept),
-            "stderr": float(self.stderr),
-            "ci": np.asarray(self.ci).tolist(),
-            "level": self.level,
-            "method": self.method,
-        }
 
 
 def loglog_slope(

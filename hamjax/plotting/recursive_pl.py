@@ -104,16 +104,23 @@ def plot_curves(
     logx: bool = False,
     logy: bool = True,
     bands: dict | None = None,
+    dots: bool = False,
     ax=None,
 ) -> Figure:
-    """Generic study plot: one line per entry of `curves` (name -> y values), with
-    optional `bands` (name -> (low, high)) shaded."""
+    """Generic study plot: one series per entry of `curves` (name -> y values), a
+    line with markers and optional `bands` (name -> (low, high)) shaded, or with
+    `dots` a scatter of per-realisation values (`x` may then be a dict too, name ->
+    x values). The y axis is logarithmic if `logy` and some value is > 0."""
     fig, ax = _axes(ax)
     for name, y in curves.items():
-        (line,) = ax.plot(x, y, marker="o", ms=3, label=name)
+        xs = x[name] if isinstance(x, dict) else x
+        if dots:
+            ax.scatter(np.asarray(xs), np.asarray(y), s=4, alpha=0.5, label=name)
+            continue
+        (line,) = ax.plot(xs, y, marker="o", ms=3, label=name)
         if bands and name in bands:
             lo, hi = bands[name]
-            ax.fill_between(x, lo, hi, color=line.get_color(), alpha=0.2)
+            ax.fill_between(xs, lo, hi, color=line.get_color(), alpha=0.2)
     values = np.concatenate(
         [np.ravel(np.asarray(y, dtype=float)) for y in curves.values()]
     )
@@ -121,10 +128,15 @@ def plot_curves(
         ax.set_xscale("log")
     if logy and np.any(np.isfinite(values) & (values > 0)):
         ax.set_yscale("log")
+    return _labelled(fig, ax, xlabel, ylabel, title, markerscale=3 if dots else 1)
+
+
+def _labelled(fig, ax, xlabel: str, ylabel: str, title: str, **legend) -> Figure:
+    """The study plots' axis labels, small title and legend, laid out."""
     ax.set_xlabel(xlabel)
     ax.set_ylabel(ylabel)
     ax.set_title(title, fontsize=9)
-    ax.legend(fontsize=7)
+    ax.legend(fontsize=7, **legend)
     fig.tight_layout()
     return fig
 
@@ -145,42 +157,4 @@ def plot_histogram(
         ax.hist(f, bins=bins, alpha=0.5, label=name)
     if logx:
         ax.set_xscale("log")
-    ax.set_xlabel(xlabel)
-    ax.set_ylabel("realisations")
-    ax.set_title(title, fontsize=9)
-    ax.legend(fontsize=7)
-    fig.tight_layout()
-    return fig
-
-
-def plot_scatter(
-    x,
-    ys: dict,
-    *,
-    xlabel: str,
-    ylabel: str,
-    title: str,
-    logx: bool = True,
-    logy: bool = True,
-    ax=None,
-) -> Figure:
-    """Scatter of per-realisation values: one series per entry of `ys`."""
-    fig, ax = _axes(ax)
-    for name, y in ys.items():
-        ax.scatter(
-            np.asarray(x[name] if isinstance(x, dict) else x),
-            np.asarray(y),
-            s=4,
-            alpha=0.5,
-            label=name,
-        )
-    if logx:
-        ax.set_xscale("log")
-    if logy:
-        ax.set_yscale("log")
-    ax.set_xlabel(xlabel)
-    ax.set_ylabel(ylabel)
-    ax.set_title(title, fontsize=9)
-    ax.legend(fontsize=7, markerscale=3)
-    fig.tight_layout()
-    return fig
+    return _labelled(fig, ax, xlabel, "realisations", title)

@@ -46,10 +46,19 @@ def linear_response(
     - `u`: input samples, shape `(time,)`.
     - `dt`: sampling period (s); required for a continuous block.
     """
+    return discrete_block(linear, dt=dt).response(u)
+
+
+def discrete_block(
+    linear: AbstractLinearBlock, *, dt: float | None
+) -> DiscreteTransferFunction | DiscreteStateSpace:
+    """The discrete block that simulates `linear` at sampling period `dt`: a
+    continuous one discretised by zero-order hold, a discrete one itself (its own
+    `dt`, when it has one, must be `dt`)."""
     if isinstance(linear, ContinuousTransferFunction):
         if dt is None:
             raise ValueError("a continuous linear block needs the sampling period `dt`")
-        return linear.discretise(dt).response(u)
+        return linear.discretise(dt)
     if isinstance(linear, DiscreteTransferFunction | DiscreteStateSpace):
         own = linear.dt
         if dt is not None and own is not None and abs(dt - own) > 1e-9 * own:
@@ -57,7 +66,7 @@ def linear_response(
                 f"the data are sampled at dt = {dt:g} s but the discrete linear "
                 f"block has dt = {own:g} s"
             )
-        return linear.response(u)
+        return linear
     raise TypeError(f"unsupported linear block {type(linear).__name__}")
 
 

@@ -23,11 +23,11 @@ from jaxtyping import Array, Float, UInt
 from ..models import (
     AbstractHysteresisNonlinearity,
     AbstractStaticNonlinearity,
-    ContinuousTransferFunction,
     DiscreteStateSpace,
     DiscreteTransferFunction,
     Hammerstein,
 )
+from .discrete import discrete_block
 
 
 class _Stepper(eqx.Module):
@@ -43,11 +43,7 @@ class _Stepper(eqx.Module):
             if isinstance(nl, AbstractHysteresisNonlinearity)
             else None
         )
-        if isinstance(self.linear, DiscreteTransferFunction):
-            n = max(self.linear.order, 1)
-        else:
-            n = self.linear.A.shape[0]
-        return s0, jnp.zeros((n, v0.shape[0]), v0.dtype)
+        return s0, self.linear.zero_state(v0)
 
     def step(self, state, vk: Float[Array, " batch"]):
         s, z = state
@@ -56,19 +52,7 @@ class _Stepper(eqx.Module):
             s, u = jax.vmap(nl.step)(s, vk)
         else:
             u = nl(vk)
-        linear = self.linear
-        if isinstance(linear, DiscreteTransferFunction):
-            # Direct form II transposed, as DiscreteTransferFunction.response.
-            b, a = linear._padded()
-            n = linear.order
-            y = b[0] * u + (z[0] if n > 0 else 0.0)
-            if n > 0:
-                shifted = jnp.concatenate([z[1:], jnp.zeros_like(z[:1])], axis=0)
-                z = shifted + b[1:, None] * u[None] - a[1:, None] * y[None]
-        else:  # as DiscreteStateSpace.response
-            A, B, c, d = linear.A, linear.B[:, 0], linear.C[0], linear.D[0, 0]
-            y = c @ z + d * u
-            z = A @ z + B[:, None] * u[None]
+        z, y = self.linear.step(z, u)  # the block's own step, batched
         return (s, z), y
 
 
@@ -80,20 +64,7 @@ def stepper(plant: Hammerstein, *, dt: float | None = None) -> _Stepper:
     nl, linear = plant.nonlinearity, plant.linear
     if not isinstance(nl, AbstractStaticNonlinearity | AbstractHysteresisNonlinearity):
         raise TypeError(f"expected a hamjax nonlinearity; got {type(nl).__name__}")
-    if isinstance(linear, ContinuousTransferFunction):
-        if dt is None:
-            raise ValueError("a continuous linear block needs the sampling period `dt`")
-        linear = linear.discretise(dt)
-    elif isinstance(linear, DiscreteTransferFunction | DiscreteStateSpace):
-        own = linear.dt
-        if dt is not None and own is not None and abs(dt - own) > 1e-9 * own:
-            raise ValueError(
-                f"the data are sampled at dt = {dt:g} s but the discrete linear "
-                f"block has dt = {own:g} s"
-            )
-    else:
-        raise TypeError(f"unsupported linear block {type(linear).__name__}")
-    return _Stepper(plant, linear)
+    return _Stepper(plant, discrete_block(linear, dt=dt))
 
 
 def simulate_time_major(

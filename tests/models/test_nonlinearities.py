@@ -418,3 +418,30 @@ def test_static_nonlinearities_under_filter_jit():
         hj.DeadZone.symmetric(1),
     ):
         np.testing.assert_array_equal(eqx.filter_jit(lambda f, v: f(v))(f, v), f(v))
+
+
+@pytest.mark.parametrize(
+    "make",
+    [
+        lambda: hj.PiecewiseLinear(k1=1, k2=2, d1=1, d2=-2),
+        lambda: hj.DeadZone(lower=-1, upper=1),
+        lambda: hj.Scaled(inner=hj.Identity(), gain=3),
+        lambda: hj.OutputScaled(inner=hj.Backlash.from_width(1), gain=-2),
+        lambda: hj.Shifted(offset=1),
+        lambda: hj.Tabulated([0, 1, 2], [0, 1, 0]),
+        lambda: hj.ContinuousTransferFunction([1], [1, 2]),
+        lambda: hj.AR1Noise(1, 0),
+    ],
+)
+def test_fields_given_as_integers_are_stored_as_float64(make):
+    """`float_field`: whatever array-like a model is built from, its arrays are
+    float64 (so no integer arithmetic leaks into the simulation)."""
+    leaves = [x for x in jax.tree.leaves(make()) if eqx.is_array(x)]
+    assert leaves and all(x.dtype == jnp.float64 for x in leaves)
+
+
+def test_keyword_only_fields_refuse_positions():
+    with pytest.raises(TypeError):
+        hj.PiecewiseLinear(1.0, 2.0)
+    with pytest.raises(TypeError):
+        hj.DeadZone(-1.0, 1.0)

@@ -1,6 +1,7 @@
 """FGI (seed 000, Table 2): periodic staircase experiment and G(jk omega)."""
 
 import argparse
+import dataclasses
 import math
 from pathlib import Path
 
@@ -11,7 +12,7 @@ from ..._errors import UserInputError
 from ..._results import RESULTS
 from ...identification.seed000.fgi_table2 import identify_fgi
 from ...io import read_data, read_design, read_json, write_csv, write_json
-from ...signals import fgi_period_samples, periodic_staircase
+from ...signals import FGIDesign
 from .._common import (
     add_data_folder,
     add_experiment_folder,
@@ -83,28 +84,25 @@ def experiment(args: argparse.Namespace) -> int:
     blocks, start = [], int(round(init / dt)) * 2
     for omega in args.omega:
         try:
-            period_samples, used = fgi_period_samples(omega, dt, len(levels))
+            fgi = FGIDesign.settling(
+                levels, omega=omega, dt=dt, periods=args.periods, settle=settle
+            )
         except ValueError as err:
             raise UserInputError(f"--omega {omega:g}: {err}") from None
-        period = period_samples * dt
-        transient = (
-            math.ceil(settle / period)
-            if args.transient_periods is None
-            else args.transient_periods
-        )
-        total = transient + args.periods
+        if args.transient_periods is not None:
+            fgi = dataclasses.replace(fgi, transient_periods=args.transient_periods)
         blocks.append(
             {
                 "omega_requested": omega,
-                "omega": used,
-                "period_samples": period_samples,
-                "transient_periods": transient,
-                "periods": args.periods,
+                "omega": fgi.omega,
+                "period_samples": fgi.period_samples,
+                "transient_periods": fgi.transient_periods,
+                "periods": fgi.periods,
                 "start": start,
-                "average_start": start + transient * period_samples,
+                "average_start": fgi.start(start),
             }
         )
-        start += total * period_samples
+        start += fgi.total_periods * fgi.period_samples
     design = {
         "method": "fgi",
         "dt": dt,
@@ -140,13 +138,15 @@ def fgi_input(design: dict) -> tuple[np.ndarray, np.ndarray]:
         levels, dt, v0 = design_start(design)
         parts = [np.asarray(v0)]
         for b in design["blocks"]:
-            _, vb = periodic_staircase(
-                levels,
-                period_samples=int(b["period_samples"]),
-                periods=int(b["transient_periods"]) + int(b["periods"]),
-                dt=dt,
+            fgi = FGIDesign(
+                tuple(float(x) for x in levels),
+                dt,
+                float(b["omega"]),
+                int(b["period_samples"]),
+                int(b["transient_periods"]),
+                int(b["periods"]),
             )
-            parts.append(np.asarray(vb))
+            parts.append(np.asarray(fgi.input()[1]))
     except (ValueError, KeyError, TypeError) as err:
         raise UserInputError(f"experiment.json: invalid FGI design ({err})") from None
     v = np.concatenate(parts)

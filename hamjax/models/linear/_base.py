@@ -24,6 +24,20 @@ def companion_roots(tail: Float[Array, " n"], *, xp=jnp) -> Array:
     return xp.linalg.eigvals(companion)
 
 
+def rational_stable(den, num, *, continuous: bool, xp=jnp) -> Bool[Array, ""]:
+    r"""`stable()` of a rational block from its denominator `den` (highest power of
+    $s$, or of $z$, first) and numerator `num`: every coefficient finite and every
+    root of `den` in the stability region, $\mathrm{Re}\,p < 0$ (`continuous`) or
+    $|p| < 1$."""
+    den, num = xp.asarray(den), xp.asarray(num)
+    finite = xp.all(xp.isfinite(den)) & xp.all(xp.isfinite(num))
+    if den.shape[0] == 1:
+        return finite
+    roots = companion_roots(den[1:] / den[0], xp=xp)
+    inside = roots.real < 0.0 if continuous else xp.abs(roots) < 1.0
+    return xp.all(inside) & finite
+
+
 class AbstractLinearBlock(eqx.Module):
     """A stable, single-input single-output linear time-invariant block."""
 
@@ -55,7 +69,33 @@ class AbstractLinearBlock(eqx.Module):
 
 
 class AbstractDiscreteLinearBlock(AbstractLinearBlock):
-    """A linear block in discrete time (one step per sample)."""
+    """A linear block in discrete time (one step per sample).
+
+    `step` is the one sample of the block that `response` scans and that the
+    time-major simulation (`hamjax.simulation.time_major`) runs for a batch: the
+    input `u_k` may carry batch axes, the state then has them after its own axis.
+    """
+
+    @abc.abstractmethod
+    def zero_state(self, u: Float[Array, "*batch"]) -> Float[Array, " n *batch"]:
+        """The state at rest, for inputs shaped (and typed) like `u`."""
+
+    @abc.abstractmethod
+    def step(
+        self, state: Float[Array, " n *batch"], u: Float[Array, "*batch"]
+    ) -> tuple[Float[Array, " n *batch"], Float[Array, "*batch"]]:
+        """One sample: `(state, u_k) -> (next state, y_k)`."""
+
+
+def outer(
+    coefficients: Float[Array, " n"], u: Float[Array, "*batch"]
+) -> Float[Array, " n *batch"]:
+    """$c_i u$ for every coefficient $c_i$: the state axis first, then the batch
+    axes of `u` (none: the plain product)."""
+    u = jnp.asarray(u)
+    if u.ndim == 0:
+        return coefficients * u
+    return coefficients[(slice(None),) + (None,) * u.ndim] * u[None]
 
 
 class AbstractContinuousLinearBlock(AbstractLinearBlock):

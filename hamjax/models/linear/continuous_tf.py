@@ -6,7 +6,8 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float
 
 from ..._checks import check_finite, concrete
-from ._base import AbstractContinuousLinearBlock, companion_roots
+from ..._fields import float_field
+from ._base import AbstractContinuousLinearBlock, rational_stable
 from .state_space import DiscreteStateSpace
 
 
@@ -20,12 +21,8 @@ class ContinuousTransferFunction(AbstractContinuousLinearBlock):
     inputs (`hamjax.simulate_diffrax`).
     """
 
-    num: Float[Array, " m"]
-    den: Float[Array, " n"]
-
-    def __init__(self, num: Float[ArrayLike, " m"], den: Float[ArrayLike, " n"]):
-        self.num = jnp.asarray(num, dtype=float)
-        self.den = jnp.asarray(den, dtype=float)
+    num: Float[Array, " m"] = float_field()
+    den: Float[Array, " n"] = float_field()
 
     def __check_init__(self):
         if self.num.ndim != 1 or self.den.ndim != 1 or self.den.shape[0] < 1:
@@ -58,12 +55,7 @@ class ContinuousTransferFunction(AbstractContinuousLinearBlock):
         return np.roots(den)
 
     def stable(self, *, xp=jnp) -> Bool[Array, ""]:
-        num, den = xp.asarray(self.num), xp.asarray(self.den)
-        finite = xp.all(xp.isfinite(den)) & xp.all(xp.isfinite(num))
-        if den.shape[0] == 1:
-            return finite
-        roots = companion_roots(den[1:] / den[0], xp=xp)
-        return xp.all(roots.real < 0.0) & finite
+        return rational_stable(self.den, self.num, continuous=True, xp=xp)
 
     def scaled(self, gain) -> "ContinuousTransferFunction":
         return ContinuousTransferFunction(self.num * gain, self.den)

@@ -8,7 +8,7 @@ from jaxtyping import Array, ArrayLike, Bool, Float
 
 from ..._checks import check_finite, concrete
 from ..._types import Signal
-from ._base import AbstractDiscreteLinearBlock, companion_roots
+from ._base import AbstractDiscreteLinearBlock, outer, rational_stable
 
 
 class DiscreteTransferFunction(AbstractDiscreteLinearBlock):
@@ -78,12 +78,8 @@ class DiscreteTransferFunction(AbstractDiscreteLinearBlock):
         return np.roots(a) if a.shape[0] > 1 else np.zeros(0, complex)
 
     def stable(self, *, xp=jnp) -> Bool[Array, ""]:
-        a, b = xp.asarray(self.a), xp.asarray(self.b)
-        finite = xp.all(xp.isfinite(a)) & xp.all(xp.isfinite(b))
-        if a.shape[0] == 1:
-            return finite
-        roots = companion_roots(a[1:] / a[0], xp=xp)
-        return xp.all(xp.abs(roots) < 1.0) & finite
+        # A(q^-1) = 1 + a1 q^-1 + ...: its poles are the roots of z^n + a1 z^(n-1) + ...
+        return rational_stable(self.a, self.b, continuous=False, xp=xp)
 
     def scaled(self, gain) -> "DiscreteTransferFunction":
         return DiscreteTransferFunction(self.b * gain, self.a, self.dt)
@@ -93,18 +89,28 @@ class DiscreteTransferFunction(AbstractDiscreteLinearBlock):
         z1 = jnp.exp(-1j * jnp.asarray(omega, dtype=float))
         return jnp.polyval(self.b[::-1], z1) / jnp.polyval(self.a[::-1], z1)
 
+    def zero_state(self, u: Float[Array, "*batch"]) -> Float[Array, " n *batch"]:
+        return jnp.zeros((max(self.order, 1),) + jnp.shape(u), jnp.result_type(u))
+
+    def step(self, state, u):
+        """Direct form II transposed, one sample."""
+        b, a = self._padded()
+        return _df2t_step(b, a, state, u)
+
     def response(self, u: Signal) -> Signal:
         """Output from rest for the input samples `u` (same as `lfilter(b, a, u)`)."""
         b, a = self._padded()
-        n = self.order
-        if n == 0:
+        if self.order == 0:
             return b[0] * u
-
-        def step(z, uk):
-            yk = b[0] * uk + z[0]
-            z_next = jnp.concatenate([z[1:], jnp.zeros(1, z.dtype)])
-            z_next = z_next + b[1:] * uk - a[1:] * yk
-            return z_next, yk
-
-        _, y = lax.scan(step, jnp.zeros(n, u.dtype), u)
+        _, y = lax.scan(lambda z, uk: _df2t_step(b, a, z, uk), self.zero_state(u[0]), u)
         return y
+
+
+def _df2t_step(b, a, z, u):
+    r"""`DiscreteTransferFunction.step` from its padded `(b, a)`: $y_k = b_0 u_k +
+    z_0$, then $z \leftarrow$ (z shifted up) $+ b_{1:} u_k - a_{1:} y_k$."""
+    if b.shape[0] == 1:  # order 0: a static gain, the state stays at zero
+        return z, b[0] * u
+    y = b[0] * u + z[0]
+    shifted = jnp.concatenate([z[1:], jnp.zeros_like(z[:1])], axis=0)
+    return shifted + outer(b[1:], u) - outer(a[1:], y), y

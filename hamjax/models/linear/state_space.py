@@ -8,7 +8,7 @@ from jaxtyping import Array, ArrayLike, Bool, Float
 
 from ..._checks import concrete
 from ..._types import Signal
-from ._base import AbstractDiscreteLinearBlock
+from ._base import AbstractDiscreteLinearBlock, outer
 
 
 class DiscreteStateSpace(AbstractDiscreteLinearBlock):
@@ -56,12 +56,23 @@ class DiscreteStateSpace(AbstractDiscreteLinearBlock):
     def scaled(self, gain) -> "DiscreteStateSpace":
         return DiscreteStateSpace(self.A, self.B, self.C * gain, self.D * gain, self.dt)
 
+    def zero_state(self, u: Float[Array, "*batch"]) -> Float[Array, " n *batch"]:
+        return jnp.zeros((self.A.shape[0],) + jnp.shape(u), jnp.result_type(u))
+
+    def step(self, state, u):
+        r"""$x \leftarrow A x + B u_k$, $y_k = C x + D u_k$."""
+        return _ss_step(self._vectors(), state, u)
+
+    def _vectors(self):
+        return self.A, self.B[:, 0], self.C[0], self.D[0, 0]
+
     def response(self, u: Signal) -> Signal:
         """Output from rest for the input samples `u`."""
-        A, B, c, d = self.A, self.B[:, 0], self.C[0], self.D[0, 0]
-
-        def step(x, uk):
-            return A @ x + B * uk, c @ x + d * uk
-
-        _, y = lax.scan(step, jnp.zeros(A.shape[0], u.dtype), u)
+        abcd = self._vectors()
+        _, y = lax.scan(lambda x, uk: _ss_step(abcd, x, uk), self.zero_state(u[0]), u)
         return y
+
+
+def _ss_step(abcd, x, u):
+    A, B, c, d = abcd
+    return A @ x + outer(B, u), c @ x + d * u

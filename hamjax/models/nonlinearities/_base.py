@@ -6,8 +6,9 @@ from typing import Any, TypeVar
 import equinox as eqx
 import jax.lax as lax
 import jax.numpy as jnp
-from jaxtyping import Array, ArrayLike, Float, PyTree
+from jaxtyping import Array, Float, PyTree
 
+from ..._fields import float_field
 from ..._types import Signal
 
 
@@ -30,12 +31,8 @@ class AbstractBandNonlinearity(AbstractStaticNonlinearity):
     """A static map set by a band `[lower, upper]` of the input (keyword-only,
     stored as float arrays)."""
 
-    lower: Float[Array, ""]
-    upper: Float[Array, ""]
-
-    def __init__(self, *, lower: Float[ArrayLike, ""], upper: Float[ArrayLike, ""]):
-        self.lower = jnp.asarray(lower, dtype=float)
-        self.upper = jnp.asarray(upper, dtype=float)
+    lower: Float[Array, ""] = float_field(kw_only=True)
+    upper: Float[Array, ""] = float_field(kw_only=True)
 
 
 class AbstractHysteresisNonlinearity(AbstractNonlinearity):

@@ -2,9 +2,10 @@
 
 from typing import Any
 
-import jax.numpy as jnp
-from jaxtyping import Array, ArrayLike, Float
+import equinox as eqx
+from jaxtyping import Array, Float
 
+from ..._fields import float_field
 from ._base import AbstractHysteresisNonlinearity
 
 
@@ -16,14 +17,8 @@ class OutputScaled(AbstractHysteresisNonlinearity):
     to the output of the unchanged operator instead.
     """
 
-    inner: AbstractHysteresisNonlinearity
-    gain: Float[Array, ""]
-
-    def __init__(
-        self, *, inner: AbstractHysteresisNonlinearity, gain: Float[ArrayLike, ""]
-    ):
-        self.inner = inner
-        self.gain = jnp.asarray(gain, dtype=float)
+    inner: AbstractHysteresisNonlinearity = eqx.field(kw_only=True)
+    gain: Float[Array, ""] = float_field(kw_only=True)
 
     def init(self, v0: Float[Array, ""]) -> Any:
         return self.inner.init(v0)

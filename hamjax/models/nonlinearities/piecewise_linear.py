@@ -1,9 +1,10 @@
 """Two-segment piecewise-linear map with preload and dead zone (seed 001, Fig. 2)."""
 
 import jax.numpy as jnp
-from jaxtyping import Array, ArrayLike, Float
+from jaxtyping import Array, Float
 
 from ..._checks import concrete
+from ..._fields import float_field
 from ._base import AbstractStaticNonlinearity
 
 
@@ -35,26 +36,12 @@ class PiecewiseLinear(AbstractStaticNonlinearity):
     ```
     """
 
-    k1: Float[Array, ""]
-    k2: Float[Array, ""]
-    d1: Float[Array, ""]
-    d2: Float[Array, ""]
-    l1: Float[Array, ""]
-    l2: Float[Array, ""]
-
-    def __init__(
-        self,
-        *,
-        k1: Float[ArrayLike, ""],
-        k2: Float[ArrayLike, ""],
-        d1: Float[ArrayLike, ""] = 0.0,
-        d2: Float[ArrayLike, ""] = 0.0,
-        l1: Float[ArrayLike, ""] = 0.0,
-        l2: Float[ArrayLike, ""] = 0.0,
-    ):
-        self.k1, self.k2, self.d1, self.d2, self.l1, self.l2 = (
-            jnp.asarray(x, dtype=float) for x in (k1, k2, d1, d2, l1, l2)
-        )
+    k1: Float[Array, ""] = float_field(kw_only=True)
+    k2: Float[Array, ""] = float_field(kw_only=True)
+    d1: Float[Array, ""] = float_field(kw_only=True, default=0.0)
+    d2: Float[Array, ""] = float_field(kw_only=True, default=0.0)
+    l1: Float[Array, ""] = float_field(kw_only=True, default=0.0)
+    l2: Float[Array, ""] = float_field(kw_only=True, default=0.0)
 
     def __check_init__(self):
         for name in ("k1", "k2", "d1", "d2", "l1", "l2"):

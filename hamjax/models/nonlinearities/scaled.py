@@ -1,8 +1,9 @@
 """A static map scaled at its output: $k F(v)$."""
 
-import jax.numpy as jnp
-from jaxtyping import Array, ArrayLike, Float
+import equinox as eqx
+from jaxtyping import Array, Float
 
+from ..._fields import float_field
 from ._base import AbstractStaticNonlinearity
 
 
@@ -15,14 +16,8 @@ class Scaled(AbstractStaticNonlinearity):
     ```
     """
 
-    inner: AbstractStaticNonlinearity
-    gain: Float[Array, ""]
-
-    def __init__(
-        self, *, inner: AbstractStaticNonlinearity, gain: Float[ArrayLike, ""]
-    ):
-        self.inner = inner
-        self.gain = jnp.asarray(gain, dtype=float)
+    inner: AbstractStaticNonlinearity = eqx.field(kw_only=True)
+    gain: Float[Array, ""] = float_field(kw_only=True)
 
     def __call__(self, v: Float[Array, "*shape"]) -> Float[Array, "*shape"]:
         return self.gain * self.inner(v)

@@ -1,8 +1,9 @@
 """A static map shifted vertically: $F(v) + c$ (the straight-line backlash borders)."""
 
-import jax.numpy as jnp
-from jaxtyping import Array, ArrayLike, Float
+import equinox as eqx
+from jaxtyping import Array, Float
 
+from ..._fields import float_field
 from ._base import AbstractStaticNonlinearity
 from .identity import Identity
 
@@ -16,17 +17,10 @@ class Shifted(AbstractStaticNonlinearity):
     ```
     """
 
-    offset: Float[Array, ""]
-    inner: AbstractStaticNonlinearity
-
-    def __init__(
-        self,
-        *,
-        offset: Float[ArrayLike, ""],
-        inner: AbstractStaticNonlinearity | None = None,
-    ):
-        self.offset = jnp.asarray(offset, dtype=float)
-        self.inner = Identity() if inner is None else inner
+    offset: Float[Array, ""] = float_field(kw_only=True)
+    inner: AbstractStaticNonlinearity = eqx.field(
+        kw_only=True, default_factory=Identity
+    )
 
     def __call__(self, v: Float[Array, "*shape"]) -> Float[Array, "*shape"]:
         return self.inner(v) + self.offset

@@ -1,9 +1,10 @@
 """A static map tabulated on a grid, linearly interpolated."""
 
 import jax.numpy as jnp
-from jaxtyping import Array, ArrayLike, Float
+from jaxtyping import Array, Float
 
 from ..._checks import check_finite, check_strictly_increasing
+from ..._fields import float_field
 from ._base import AbstractStaticNonlinearity
 
 
@@ -18,12 +19,8 @@ class Tabulated(AbstractStaticNonlinearity):
     ```
     """
 
-    v: Float[Array, " grid"]
-    u: Float[Array, " grid"]
-
-    def __init__(self, v: Float[ArrayLike, " grid"], u: Float[ArrayLike, " grid"]):
-        self.v = jnp.asarray(v, dtype=float)
-        self.u = jnp.asarray(u, dtype=float)
+    v: Float[Array, " grid"] = float_field()
+    u: Float[Array, " grid"] = float_field()
 
     def __check_init__(self):
         if self.v.ndim != 1 or self.v.shape != self.u.shape:

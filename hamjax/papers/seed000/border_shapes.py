@@ -9,6 +9,7 @@ Fig. 4b composition used by `hamjax reproduce backlash-frequency`.
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
+from ..._fields import float_field
 from ...models import AbstractStaticNonlinearity, Backlash, Tabulated
 
 
@@ -28,20 +29,9 @@ def cycle_points(
 class Relay(AbstractStaticNonlinearity):
     """Step border: `low` for $v <$ `threshold`, `high` from `threshold` on."""
 
-    threshold: Float[Array, ""]
-    low: Float[Array, ""]
-    high: Float[Array, ""]
-
-    def __init__(
-        self,
-        *,
-        threshold: Float[ArrayLike, ""],
-        low: Float[ArrayLike, ""],
-        high: Float[ArrayLike, ""],
-    ):
-        self.threshold = jnp.asarray(threshold, dtype=float)
-        self.low = jnp.asarray(low, dtype=float)
-        self.high = jnp.asarray(high, dtype=float)
+    threshold: Float[Array, ""] = float_field(kw_only=True)
+    low: Float[Array, ""] = float_field(kw_only=True)
+    high: Float[Array, ""] = float_field(kw_only=True)
 
     def __call__(self, v: Float[Array, "*shape"]) -> Float[Array, "*shape"]:
         return jnp.where(v >= self.threshold, self.high, self.low)
@@ -50,16 +40,10 @@ class Relay(AbstractStaticNonlinearity):
 class Wavy(AbstractStaticNonlinearity):
     """$s v + A \\sin(\\nu v) + c$: non-invertible when $A\\nu > s$."""
 
-    slope: Float[Array, ""]
-    amplitude: Float[Array, ""]
-    frequency: Float[Array, ""]
-    offset: Float[Array, ""]
-
-    def __init__(self, *, slope, amplitude, frequency, offset):
-        self.slope = jnp.asarray(slope, dtype=float)
-        self.amplitude = jnp.asarray(amplitude, dtype=float)
-        self.frequency = jnp.asarray(frequency, dtype=float)
-        self.offset = jnp.asarray(offset, dtype=float)
+    slope: Float[Array, ""] = float_field(kw_only=True)
+    amplitude: Float[Array, ""] = float_field(kw_only=True)
+    frequency: Float[Array, ""] = float_field(kw_only=True)
+    offset: Float[Array, ""] = float_field(kw_only=True)
 
     def __call__(self, v: Float[Array, "*shape"]) -> Float[Array, "*shape"]:
         return (
@@ -70,14 +54,9 @@ class Wavy(AbstractStaticNonlinearity):
 class Cubic(AbstractStaticNonlinearity):
     """$s v + c_3 v^3 + c$, the Fig. 4b static map before a straight play."""
 
-    slope: Float[Array, ""]
-    cubic: Float[Array, ""]
-    offset: Float[Array, ""]
-
-    def __init__(self, *, slope, cubic, offset):
-        self.slope = jnp.asarray(slope, dtype=float)
-        self.cubic = jnp.asarray(cubic, dtype=float)
-        self.offset = jnp.asarray(offset, dtype=float)
+    slope: Float[Array, ""] = float_field(kw_only=True)
+    cubic: Float[Array, ""] = float_field(kw_only=True)
+    offset: Float[Array, ""] = float_field(kw_only=True)
 
     def __call__(self, v: Float[Array, "*shape"]) -> Float[Array, "*shape"]:
         return self.slope * v + self.cubic * v**3 + self.offset

@@ -6,7 +6,8 @@ import json
 from pathlib import Path
 
 from ...._argtypes import positive_int
-from ....montecarlo.registry import StudyOption
+from ...._types import Signal
+from ....montecarlo.registry import StudyOption, option_values
 from ....montecarlo.storage import atomic_write_bytes
 from ....simulation import simulate
 from ..._study import run_realisations
@@ -25,11 +26,13 @@ def headless() -> None:
     matplotlib.use("Agg")
 
 
-def clean_record(case: RecursivePLCase, periods: int):
-    """`(v, w)`: `periods` periods of the input (5.1) for order 2 at `case`'s
-    levels, and `case`'s noise-free output."""
+def clean_record(case: RecursivePLCase, args, options) -> tuple[int, Signal, Signal]:
+    """`(periods, v, w)`: the study's `--periods` (one of its `options`), that many
+    periods of the input (5.1) for order 2 at `case`'s levels, and `case`'s
+    noise-free output."""
+    periods = option_values(args, options).periods
     v = pe_input(case.levels, 2, periods)
-    return v, simulate(case.plant(), v)
+    return periods, v, simulate(case.plant(), v)
 
 
 def run_trials(key, trial, name: str, out: Path, args, budget: dict, **metadata):

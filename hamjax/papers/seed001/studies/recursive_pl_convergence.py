@@ -107,7 +107,7 @@ def run(key, *, realisations: int, chunk: int, out: Path, quiet: bool, args) -> 
     import jax.random as jr
 
     headless()
-    from ....plotting.recursive_pl import plot_histogram, plot_scatter
+    from ....plotting.recursive_pl import plot_curves, plot_histogram
 
     opts = option_values(args, OPTIONS)
     periods, orders = opts.periods, opts.orders
@@ -174,12 +174,14 @@ def run(key, *, realisations: int, chunk: int, out: Path, quiet: bool, args) -> 
         title="Prop. 5.2(2): noise-free convergence time, random plants",
     )
     fig.savefig(out / "samples_to_1e-6.png", dpi=120)
-    fig = plot_scatter(
+    fig = plot_curves(
         excitation,
         samples,
         xlabel="excitation (lambda_min/lambda_max, one period)",
         ylabel="samples to 1e-6",
         title="slow cases are poorly excited",
+        logx=True,
+        dots=True,
     )
     fig.savefig(out / "excitation_vs_samples.png", dpi=120)
     fractions = {k: v["fraction_within_1e-6"] for k, v in per_order.items()}

@@ -28,7 +28,6 @@ from ....identification.seed001 import (
     regressor,
 )
 from ....models import PiecewiseLinear
-from ....montecarlo.registry import option_values
 from ....montecarlo.statistics import loglog_slope
 from ..plants import RecursivePLCase, paper_case
 from ._common import clean_record, headless, periods_option, run_trials, write_summary
@@ -154,10 +153,9 @@ def run(key, *, realisations: int, chunk: int, out: Path, quiet: bool, args) -> 
     headless()
     from ....plotting.recursive_pl import plot_curves
 
-    periods = option_values(args, OPTIONS).periods
     out = Path(out)
     case = study_case()
-    v, w = clean_record(case, periods)
+    periods, v, w = clean_record(case, args, OPTIONS)
     signal_rms = float(jnp.sqrt(jnp.mean(w**2)))
     stds = np.array([signal_rms * 10 ** (-snr / 20) for snr in SNRS_DB])
     n_time = v.shape[0]

@@ -18,7 +18,6 @@ import jax.random as jr
 import numpy as np
 
 from ....identification.seed001 import normalised_gradient_convergence, regressor
-from ....montecarlo.registry import option_values
 from ..plants import paper_case
 from ._common import clean_record, headless, periods_option, run_trials, write_summary
 
@@ -76,10 +75,9 @@ def run(key, *, realisations: int, chunk: int, out: Path, quiet: bool, args) -> 
     headless()
     from ....plotting.recursive_pl import plot_curves
 
-    periods = option_values(args, OPTIONS).periods
     out = Path(out)
     case = paper_case()
-    v, y = clean_record(case, periods)
+    periods, v, y = clean_record(case, args, OPTIONS)
     phi = regressor(v, y, levels=case.levels, order=2)
     theta_star = case.theta_star()
     size = float(jnp.linalg.norm(theta_star))

@@ -79,11 +79,10 @@ def run(key, *, realisations: int, chunk: int, out: Path, quiet: bool, args) -> 
 
     from ....plotting.recursive_pl import theta_labels
 
-    opts = option_values(args, OPTIONS)
-    periods, snr = opts.periods, opts.snr
+    snr = option_values(args, OPTIONS).snr
     out = Path(out)
     case = paper_case()
-    v, w = clean_record(case, periods)
+    periods, v, w = clean_record(case, args, OPTIONS)
     std = float(jnp.sqrt(jnp.mean(w**2))) * 10 ** (-snr / 20)
     theta_star = case.theta_star()
     trial = CompareTrial(v, w, jnp.asarray(std), theta_star)

@@ -32,6 +32,8 @@ from .effects import (
     BacklashEffect,
     DeadZoneEffect,
     ExtraPoleEffect,
+    FeedbackNonlinearityEffect,
+    FrictionEffect,
     OutputNonlinearityEffect,
     ParameterMismatch,
     PreloadEffect,
@@ -54,6 +56,8 @@ DETERMINISTIC = (
     TimeDelayEffect(),
     ExtraPoleEffect(),
     OutputNonlinearityEffect(),
+    FrictionEffect(),
+    FeedbackNonlinearityEffect(),
 )
 BUCKETS = (256, 512, 1024, 1536, 2048, 3072, 4096, 6144, 8192, 12288, 16384)
 N_MAX = 4
@@ -202,6 +206,7 @@ def prepare(
     w_est = _response_numpy(plant.linear, u_est, dt)
     w_val = _response_numpy(plant.linear, u_val, dt)
     v = est["v"]
+    dw = np.diff(w_est) / dt if n_est > 1 else np.zeros(1)
     ctx = StartContext(
         v_min=float(v.min()),
         v_max=float(v.max()),
@@ -217,6 +222,9 @@ def prepare(
             q: float(x)
             for q, x in zip(QUANTILES, np.quantile(w_est, QUANTILES), strict=False)
         },
+        dw_half=float(
+            max(abs(np.quantile(dw, 0.98)), abs(np.quantile(dw, 0.02)), 1e-12)
+        ),
     )
     b_disc, ct_num, ct_pad, den_slots, den_lead, den_free = _linear_templates(nom, dt)
     names = slot_names(N_MAX)
@@ -317,6 +325,8 @@ def prepare(
         out_centre=f(w_centre),
         out_half=f(w_half),
         y_scale=f(max(float(np.std(est["y"])), 1e-12)),
+        u_scale=f(ctx.u_std),
+        dw_half=f(ctx.dw_half),
     )
     return Prepared(arrays, rows, ctx, nom, n_est, n_val, w_est, w_val, u_val)
 

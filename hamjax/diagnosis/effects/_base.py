@@ -17,6 +17,7 @@ class StartContext(eqx.Module):
     u_quantiles: dict  # quantile level -> value of the nominal u = F(v)
     u_std: float
     w_quantiles: dict  # quantile level -> value of the nominal output w
+    dw_half: float  # half range of the nominal output's rate dw/dt (2 %/98 % rule)
 
 
 class AbstractEffect(eqx.Module):

@@ -42,7 +42,7 @@ from .effects import (
     StartContext,
     TimeDelayEffect,
 )
-from .effects._base import output_half_range, scale_span
+from .effects._base import FLIP_SIGN, output_half_range, scale_span
 from .effects.time_delay import MAX_DELAY
 
 
@@ -268,19 +268,30 @@ def prepare(
         # which the fit wanders and Levenberg-Marquardt crawls.
         refit = ["gain", *refit]
     P = n_params or len(refit) + MAX_EFFECT_SLOTS
+    # the re-fitted parameters that carry the sign of G F (`FLIP_SIGN`)
+    sign_slots = {
+        NL_PIECEWISE: ("k1", "k2", "l1", "l2"),
+        NL_TABULATED: ("out_scale",),
+    }.get(nom.nl_kind, ("gain",))
     taus_tried = _delay_shortlist(est["y"], w_est)
     rows = []
     for effect in DETERMINISTIC:
         taus = taus_tried if effect.name == "time_delay" else (0,)
         for start in effect.starts(ctx):
+            flip = (
+                {n: -nominal_values[n] for n in sign_slots}
+                if FLIP_SIGN in start
+                else {}
+            )
+            start = {n: x for n, x in start.items() if n != FLIP_SIGN}
             for tau in taus:
                 free_names = refit + list(start)
                 idx = np.full(P, S)
                 idx[: len(free_names)] = [names.index(n) for n in free_names]
                 theta0 = np.zeros(P)
                 for j, n in enumerate(free_names):
-                    if n in start:
-                        raw = raw_from_physical(n, start[n])
+                    if n in start or n in flip:
+                        raw = raw_from_physical(n, {**flip, **start}[n])
                         theta0[j] = (raw - anchor[names.index(n)]) / scale[
                             names.index(n)
                         ]

@@ -4,7 +4,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from ._base import AbstractEffect, StartContext, output_half_range
+from ._base import FLIP_SIGN, AbstractEffect, StartContext, output_half_range
 
 
 def output_map(
@@ -69,4 +69,7 @@ class OutputNonlinearityEffect(AbstractEffect):
             {"out_db": 0.1 * half},
             {"out_db": 0.3 * half},
             {"out_abs": 0.95},
+            # |w| hides the sign of w: from the nominal's own sign the fit stops
+            # at a -> 1 with a shrunken gain when the plant's sign is the other
+            {"out_abs": 0.95, FLIP_SIGN: 1.0},
         ]

@@ -17,8 +17,14 @@ Modes:
   leaves, below what anyone would call a mismatch); effect shapes outside the
   catalogue forms (soft saturation, asymmetric dead zone, backlash with
   stick-slip, fractional delay, second-order lag, smooth preload, tanh/cubic
-  sensors, random-walk drift); effect RMS from 0.3 x the noise std up; records of
-  1000-4000 samples.
+  sensors, random-walk drift, Stribeck friction with a viscous part, a quintic
+  part on a cubic stiffness, an asymmetric clearance); effect RMS from 0.3 x the
+  noise std up; records of 1000-4000 samples.
+
+`friction` and `feedback_nonlinearity` (a force fed back from the output to the
+input of the linear block, simulated in one loop, `_lsim_loop`) replace a case's
+class with probability 2/14 from a key of their own (`FIRST_DRAW`): the other
+cases of a seed are those drawn before these two classes existed.
 """
 
 import math
@@ -40,9 +46,29 @@ from ...models import (
 from ...models.nonlinearities.piecewise_linear import piecewise_linear_map
 
 
-# The contract's names, in its order: none, the deterministic effects, the noise ones.
+# The contract's names: none, the deterministic effects, the noise ones.
 EFFECTS = ("none", *DETERMINISTIC_NAMES, *NOISE_NAMES)
 DETERMINISTIC = DETERMINISTIC_NAMES
+# The classes drawn before the feedback effects existed, in the order of the first
+# draw (kept, so a seed still makes the same cases), and the feedback effects, which
+# replace a case's class with probability 2/14 (every class then 1/14) from a key
+# of their own: the cases not replaced are the cases of before, draw for draw.
+FIRST_DRAW = (
+    "none",
+    "parameter_mismatch",
+    "backlash",
+    "dead_zone",
+    "saturation",
+    "preload",
+    "rate_limit",
+    "time_delay",
+    "extra_pole",
+    "output_nonlinearity",
+    "drift",
+    "coloured_noise",
+)
+FEEDBACK_EFFECTS = ("friction", "feedback_nonlinearity")
+_FEEDBACK_KEY = 611953  # folded into a case's key for the replacement draw
 
 
 class _Draw:
@@ -142,6 +168,32 @@ def _lsim(linear, u: np.ndarray, dt: float) -> np.ndarray:
     y = np.empty_like(u)
     for k, uk in enumerate(u):
         y[k] = C[0] @ x + D[0, 0] * uk
+        x = A @ x + B[:, 0] * uk
+    return y
+
+
+def _lsim_loop(linear, s: np.ndarray, dt: float, force) -> np.ndarray:
+    """Response from rest with the input $u_k = s_k - $ `force(w_k, w_{k-1})`
+    ($w_{-1} = 0$), the force seeing the output before its own feedthrough
+    ($C x_k + D s_k$; exact for the strictly proper blocks drawn here)."""
+    if isinstance(linear, DiscreteTransferFunction):
+        import scipy.signal as sg
+
+        b, a = np.asarray(linear.b, float), np.asarray(linear.a, float)
+        b = np.r_[b, np.zeros(max(len(a) - len(b), 0))]  # in q^-1: pad the end
+        # highest power of z first, the leading zeros (the delay) stripped
+        A, B, C, D = sg.tf2ss(
+            np.trim_zeros(b, "f"), np.r_[a, np.zeros(len(b) - len(a))]
+        )
+    else:
+        ss = linear.discretise(dt)
+        A, B, C, D = (np.asarray(x) for x in (ss.A, ss.B, ss.C, ss.D))
+    x, w_prev = np.zeros(A.shape[0]), 0.0
+    y = np.empty_like(s)
+    for k, sk in enumerate(s):
+        cx = float(C[0] @ x)
+        uk = sk - force(cx + D[0, 0] * sk, w_prev)
+        y[k] = w_prev = cx + D[0, 0] * uk
         x = A @ x + B[:, 0] * uk
     return y
 
@@ -251,10 +303,38 @@ class _Truth:
             u = _lfilter(np.array([1 - p["p"]]), np.array([1.0, -p["p"]]), u)
             if self.realistic:
                 u = _lfilter(np.array([1 - p["p2"]]), np.array([1.0, -p["p2"]]), u)
-        w = _lsim(lin, u, dt)
+        if e in FEEDBACK_EFFECTS:
+            w = _lsim_loop(lin, u, dt, self._force(dt))
+        else:
+            w = _lsim(lin, u, dt)
         if e == "output_nonlinearity":
             w = self._output_map(w)
         return w
+
+    def _force(self, dt):
+        """The fed-back force `(w, w_prev) -> f` of `friction` (Coulomb on the output
+        or its derivative; realistic: smooth, Stribeck rise and a viscous part) or of
+        `feedback_nonlinearity` (cubic stiffness or a clearance; realistic: a quintic
+        part, an asymmetric clearance)."""
+        p = self.params
+        if self.effect == "friction":
+
+            def friction(w, w_prev):
+                s = w if p["velocity"] == "output" else (w - w_prev) / dt
+                if not self.realistic:
+                    return p["c"] * np.sign(s)
+                rise = 1 + p["stribeck"] * np.exp(-((s / p["vs"]) ** 2))
+                return p["c"] * rise * np.tanh(s / p["eps"]) + p["viscous"] * s
+
+            return friction
+        W, U = p["scale"], p["u_scale"]
+
+        def feedback(w, _):
+            if p["shape"] == "cubic":
+                return U * (p["k"] * (w / W) ** 3 + p["k5"] * (w / W) ** 5)
+            return p["k"] * U / W * (w - np.clip(w, -p["b"], p["b_hi"]))
+
+        return feedback
 
     def _output_map(self, w):
         p = self.params
@@ -329,7 +409,9 @@ def _draw_case(key, realism: str) -> dict | None:
     realistic = realism == "realistic"
     d = _Draw(key)
     dt = 0.05
-    effect = d.choice(EFFECTS)
+    effect = d.choice(FIRST_DRAW)
+    if float(jr.uniform(jr.fold_in(key, _FEEDBACK_KEY))) < 2 / 14:
+        effect = FEEDBACK_EFFECTS[int(jr.bernoulli(jr.fold_in(key, _FEEDBACK_KEY + 1)))]
     n = d.integer(1000, 4000) if realistic else 2000
     kinds = (
         ("identity", "tabulated")
@@ -395,6 +477,22 @@ def _draw_case(key, realism: str) -> dict | None:
         params["lo"] = float(np.quantile(w_nom_est, d.uniform(0.03, 0.2)))
         params["hi"] = float(np.quantile(w_nom_est, d.uniform(0.8, 0.97)))
         params["b"] = d.uniform(0.05, 0.2) * W
+    elif effect == "friction":
+        params["velocity"] = d.choice(("output", "derivative"))
+        rate = np.abs(np.diff(w_nom_est)) / dt
+        V = W if params["velocity"] == "output" else np.quantile(rate, 0.98)
+        params["c"] = d.uniform(0.05, 0.3) * float(np.std(u_est))
+        params["eps"] = d.uniform(0.005, 0.02) * V
+        params["stribeck"] = d.uniform(0.0, 0.5) if realistic else 0.0
+        params["vs"] = d.uniform(0.05, 0.2) * V
+        params["viscous"] = d.uniform(0.0, 0.1) * float(np.std(u_est)) / V
+    elif effect == "feedback_nonlinearity":
+        params["shape"] = d.choice(("cubic", "clearance"))
+        params["scale"], params["u_scale"] = W, float(np.std(u_est))
+        params["k"] = d.uniform(0.1, 0.5)
+        params["k5"] = d.uniform(0.0, 0.5) * params["k"] if realistic else 0.0
+        params["b"] = d.uniform(0.1, 0.4) * W
+        params["b_hi"] = params["b"] * (d.uniform(0.5, 1.5) if realistic else 1.0)
     truth = _Truth(
         truth_plant,
         effect if effect != "parameter_mismatch" else "none",
@@ -409,6 +507,11 @@ def _draw_case(key, realism: str) -> dict | None:
         name: _lsim(nominal.linear, _static(nominal.nonlinearity, v), dt)
         for name, v in (("estimation", v_est), ("validation", v_val))
     }
+    # a feedback loop the drawn force drives unstable is no plant: draw again
+    if not all(np.all(np.isfinite(w)) for w in ws.values()) or max(
+        _rms(ws[k]) for k in ws
+    ) > 100 * max(_rms(w_nominal[k]) for k in ws):
+        return None
     # the effect must show in both records: the smaller of the two sets the scale
     effect_rms = min(
         _rms(ws[name] - w_nominal[name]) for name in ("estimation", "validation")

@@ -220,3 +220,33 @@ def test_feedback_effects_and_sign_blind_sensor_recovered_noise_free():
     # the re-fitted gain takes the sign the sign-blind reading leaves visible
     refit = out[-1].ranking[0]["params"]["nominal_refit"]
     assert np.isclose(refit["gain"]["value"], -0.8, rtol=1e-3)
+
+
+def test_blind_generator_draws_the_feedback_classes():
+    # family A: the loop without a force is the generator's own linear response
+    # (same state space, same order of operations for continuous blocks; scipy's
+    # tf2ss against direct form II for discrete: 1e-12 of the peak), and both
+    # feedback classes come out of `make_case` in both modes, visible (effect RMS
+    # > 0) and finite (a diverging loop is drawn again)
+    from hamjax.papers.gap import blind
+
+    v = staircase(jr.key(5), 300)
+    for lin in (
+        hj.DiscreteTransferFunction(B, A, DT),
+        hj.ContinuousTransferFunction([2.0], [0.5, 1.5, 1.0]),
+    ):
+        ref = blind._lsim(lin, v, DT)
+        got = blind._lsim_loop(lin, v, DT, lambda w, wp: 0.0)
+        assert np.allclose(got, ref, rtol=0, atol=1e-12 * np.abs(ref).max())
+    seen = set()
+    for i in range(16):  # seed 7: cases 1 and 11 are friction, 15 feedback
+        for realism in ("exact", "realistic"):
+            case = blind.make_case(jr.fold_in(jr.key(7), i), realism=realism)
+            truth = case["truth"]
+            if truth["effect"] in blind.FEEDBACK_EFFECTS:
+                seen.add((truth["effect"], realism))
+                assert truth["effect_rms_over_noise"] > 0
+                assert np.all(np.isfinite(case["estimation"]["y"]))
+    assert seen == {
+        (e, r) for e in blind.FEEDBACK_EFFECTS for r in ("exact", "realistic")
+    }

@@ -53,21 +53,8 @@ DETERMINISTIC = DETERMINISTIC_NAMES
 # draw (kept, so a seed still makes the same cases), and the feedback effects, which
 # replace a case's class with probability 2/14 (every class then 1/14) from a key
 # of their own: the cases not replaced are the cases of before, draw for draw.
-FIRST_DRAW = (
-    "none",
-    "parameter_mismatch",
-    "backlash",
-    "dead_zone",
-    "saturation",
-    "preload",
-    "rate_limit",
-    "time_delay",
-    "extra_pole",
-    "output_nonlinearity",
-    "drift",
-    "coloured_noise",
-)
 FEEDBACK_EFFECTS = ("friction", "feedback_nonlinearity")
+FIRST_DRAW = tuple(e for e in EFFECTS if e not in FEEDBACK_EFFECTS)
 _FEEDBACK_KEY = 611953  # folded into a case's key for the replacement draw
 
 

@@ -6,15 +6,16 @@ $\\to$ saturation $\\to$ extra pole $\\to G \\to h$ (output map), and a feedback
 path from the output of $G$ to its input: $u' = u - f(\\text{velocity}) - \\phi(w)$
 (`friction`, `feedback_nonlinearity`).
 
-**The feedback loop** runs the filter and the fed-back force in one scan
+**The feedback loop** runs the filter and the fed-back forces in one scan
 (`feedback_scan`): at step $k$ the filter's output before consuming $u_k$ is
-$\\hat w_k = z_0 + b_0 s_k$ ($s_k$ the input side's output); the force is evaluated
-there, $u_k = s_k - f(\\hat w_k, w_{k-1}) - \\phi(\\hat w_k)$, then the filter
-consumes $u_k$. For $b_0 = 0$ (every zero-order-hold discretised strictly proper
-block) $\\hat w_k = w_k$ and the loop is exact; for $b_0 \\ne 0$ (an algebraic loop)
-this is the one-step convention that the force sees the output without its own
-feedthrough. Without a freed feedback slot the plain filter scan (`filter_scan`)
-runs instead; with every feedback slot neutral the loop gives the same numbers.
+$\\hat w_k = z_0 + b_0 s_k$ ($s_k$ the input side's output), at which the feedback
+nonlinearity $\\phi$ is evaluated; the friction acts on the velocity over the
+step, solved implicitly for $u_k$ (it sticks rather than chatters); then the
+filter consumes $u_k$. For $b_0 = 0$ (every zero-order-hold discretised strictly
+proper block) $\\hat w_k = w_k$ and the loop is exact; for $b_0 \\ne 0$ (an
+algebraic loop) this is the one-step convention that the forces see the output
+without its own feedthrough. Without a freed feedback slot the plain filter scan
+(`filter_scan`) runs instead; with every feedback slot neutral the loop gives the same numbers.
 
 One shape of model for every case and every candidate means one compilation: a
 candidate is a *row* (which slots it frees, where it starts, its delay), a case is
@@ -281,39 +282,70 @@ def feedback_scan(
     a: Array,
     s: Float[Array, " B"],
     state: tuple[Array, Array],
-    force: Callable[[Array, Array], Array],
+    phi: Callable[[Array], Array],
+    friction: Callable[[Array, Array], Array],
+    bound: Float[Array, ""],
+    dt: Float[Array, ""],
 ) -> tuple[tuple[Array, Array], Float[Array, " B"]]:
-    """The filter with `force(w_hat, w_prev)` subtracted from its input, from
-    `state = (filter state, previous output)`: `(state_end, w)` (module
-    docstring: $\\hat w_k = z_0 + b_0 s_k$; chains over blocks like `filter_scan`)."""
+    """The filter with the fed-back forces subtracted from its input, from
+    `state = (filter state, previous output)`: `(state_end, w)` (chains over
+    blocks like `filter_scan`).
+
+    At step $k$: $\\hat w_k = z_0 + b_0 s_k$ and $s'_k = s_k - \\phi(\\hat w_k)$
+    (explicit); the friction acts on the velocity over the step, $w_{k+1}$ and
+    $(w_{k+1} - w_k)/dt$, both affine in $u_k$ (direct form II transposed:
+    $w_{k+1} = z_1 - a_1 z_0 + (b_1 - a_1 b_0) u_k$ up to $b_0 u_{k+1}$), so $u_k$
+    solves $u = s'_k - $ `friction(v_w(u), v_dw(u))` (implicit, the discrete
+    form of Coulomb friction that sticks instead of chattering). The root lies in
+    $s'_k \\pm$ `bound` ($|f| \\le c_w + c_{dw}$): 40 bisections (no tangents),
+    then one Newton step, which carries the tangents of the implicit function.
+    """
 
     def step(carry, sk):
-        z, w_prev = carry
-        uk = sk - force(b[0] * sk + z[0], w_prev)
+        z, _ = carry
+        w_hat = b[0] * sk + z[0]
+        s2 = sk - phi(w_hat)
+        a_w, b_w = z[1] - a[1] * z[0], b[1] - a[1] * b[0]
+        a_d, b_d = (a_w - z[0]) / dt, (b_w - b[0]) / dt
+
+        def g(u):
+            return u - s2 + friction(a_w + b_w * u, a_d + b_d * u)
+
+        def bisect(_, lohi):
+            lo, hi = lohi
+            mid = 0.5 * (lo + hi)
+            up = lax.stop_gradient(g(mid)) > 0
+            return jnp.where(up, lo, mid), jnp.where(up, mid, hi)
+
+        c = lax.stop_gradient(bound)
+        lo, hi = lax.stop_gradient(s2) - c, lax.stop_gradient(s2) + c
+        lo, hi = lax.fori_loop(0, 40, bisect, (lo, hi))
+        root = lax.stop_gradient(0.5 * (lo + hi))
+        g0, slope = jax.jvp(g, (root,), (jnp.ones_like(root),))
+        uk = root - g0 / slope
         z, yk = _df2t_step(b, a, z, uk)
         return (z, yk), yk
 
     return lax.scan(step, state, s, unroll=1)
 
 
-def fed_back(
-    p: Float[Array, " S"], case: CaseArrays
-) -> Callable[[Array, Array], Array]:
-    """The force of the feedback path, `(w, w_prev) -> f + phi` (`friction`,
-    `feedback_nonlinearity`); identically 0 at the neutral values."""
+def feedback_arguments(p: Float[Array, " S"], case: CaseArrays) -> tuple:
+    """`(phi, friction, bound)` of `feedback_scan` at parameters `p`: the
+    feedback nonlinearity $w \\mapsto \\phi(w)$, the friction
+    $(v_w, v_{dw}) \\mapsto f$ and $c_w + c_{dw}$; all 0 at the neutral values."""
     at = named(p, case)
     eps_w, eps_dw = EPS_FRACTION * case.out_half, EPS_FRACTION * case.dw_half
+    c_w, c_dw = at("fric_w"), at("fric_dw")
 
-    def force(w, w_prev):
-        f = friction_force(
-            w, w_prev, at("fric_w"), at("fric_dw"), eps_w, eps_dw, case.dt
-        )
-        phi = feedback_force(
+    def phi(w):
+        return feedback_force(
             w, case.out_half, case.u_scale, at("fb_cubic"), at("fb_gain"), at("fb_band")
         )
-        return f + phi
 
-    return force
+    def friction(v_w, v_dw):
+        return friction_force(v_w, v_dw, c_w, c_dw, eps_w, eps_dw)
+
+    return phi, friction, c_w + c_dw
 
 
 def linear_part(
@@ -331,7 +363,7 @@ def linear_part(
     output is then carried unchanged)."""
 
     def loop(u, state):
-        return feedback_scan(b, a, u, state, fed_back(p, case))
+        return feedback_scan(b, a, u, state, *feedback_arguments(p, case), case.dt)
 
     def plain(u, state):
         z, w_prev = state

@@ -159,29 +159,42 @@ def _lsim(linear, u: np.ndarray, dt: float) -> np.ndarray:
     return y
 
 
-def _lsim_loop(linear, s: np.ndarray, dt: float, force) -> np.ndarray:
-    """Response from rest with the input $u_k = s_k - $ `force(w_k, w_{k-1})`
-    ($w_{-1} = 0$), the force seeing the output before its own feedthrough
-    ($C x_k + D s_k$; exact for the strictly proper blocks drawn here)."""
+def _lsim_loop(linear, s: np.ndarray, dt: float, forces) -> np.ndarray:
+    """Response from rest with fed-back forces `(phi, f)`: $u_k = s_k - \\phi(w_k)
+    - f(w_{k+1}, (w_{k+1} - w_k)/dt)$, $w_k = C x_k$ (the strictly proper blocks
+    drawn here), $w_{k+1} = C(A x_k + B u_k)$: the friction acts on the velocity
+    over the step, the implicit equation solved by bisection (60 halvings of
+    $s'_k \\pm$ `f`'s bound; for $c\\,\\mathrm{sign}$ this is the stick-slip
+    discretisation: the velocity stays 0 while the drive is below $c$)."""
+    phi, f, bound = forces
     if isinstance(linear, DiscreteTransferFunction):
         import scipy.signal as sg
 
         b, a = np.asarray(linear.b, float), np.asarray(linear.a, float)
         b = np.r_[b, np.zeros(max(len(a) - len(b), 0))]  # in q^-1: pad the end
         # highest power of z first, the leading zeros (the delay) stripped
-        A, B, C, D = sg.tf2ss(
-            np.trim_zeros(b, "f"), np.r_[a, np.zeros(len(b) - len(a))]
-        )
+        a = np.r_[a, np.zeros(len(b) - len(a))]
+        A, B, C, _ = sg.tf2ss(np.trim_zeros(b, "f"), a)
     else:
         ss = linear.discretise(dt)
-        A, B, C, D = (np.asarray(x) for x in (ss.A, ss.B, ss.C, ss.D))
-    x, w_prev = np.zeros(A.shape[0]), 0.0
+        A, B, C = (np.asarray(x) for x in (ss.A, ss.B, ss.C))
+    x = np.zeros(A.shape[0])
     y = np.empty_like(s)
+    c_ax, c_b = C[0] @ A, float(C[0] @ B[:, 0])
     for k, sk in enumerate(s):
-        cx = float(C[0] @ x)
-        uk = sk - force(cx + D[0, 0] * sk, w_prev)
-        y[k] = w_prev = cx + D[0, 0] * uk
-        x = A @ x + B[:, 0] * uk
+        w = float(C[0] @ x)
+        s2 = sk - phi(w)
+        alpha = float(c_ax @ x)
+        lo, hi = s2 - bound, s2 + bound
+        for _ in range(60 if bound > 0 else 0):
+            mid = 0.5 * (lo + hi)
+            w_next = alpha + c_b * mid
+            if mid - s2 + f(w_next, (w_next - w) / dt) > 0:
+                hi = mid
+            else:
+                lo = mid
+        y[k] = w
+        x = A @ x + B[:, 0] * (0.5 * (lo + hi))
     return y
 
 
@@ -291,37 +304,41 @@ class _Truth:
             if self.realistic:
                 u = _lfilter(np.array([1 - p["p2"]]), np.array([1.0, -p["p2"]]), u)
         if e in FEEDBACK_EFFECTS:
-            w = _lsim_loop(lin, u, dt, self._force(dt))
+            w = _lsim_loop(lin, u, dt, self._force())
         else:
             w = _lsim(lin, u, dt)
         if e == "output_nonlinearity":
             w = self._output_map(w)
         return w
 
-    def _force(self, dt):
-        """The fed-back force `(w, w_prev) -> f` of `friction` (Coulomb on the output
-        or its derivative; realistic: smooth, Stribeck rise and a viscous part) or of
-        `feedback_nonlinearity` (cubic stiffness or a clearance; realistic: a quintic
-        part, an asymmetric clearance)."""
+    def _force(self):
+        """`(phi, f, bound)` of `_lsim_loop`: `friction` (Coulomb on the output or
+        its derivative; realistic: smooth, Stribeck rise and a viscous part) or
+        `feedback_nonlinearity` (cubic stiffness or a clearance; realistic: a
+        quintic part, an asymmetric clearance)."""
         p = self.params
+        none = lambda *_: 0.0  # noqa: E731
         if self.effect == "friction":
 
-            def friction(w, w_prev):
-                s = w if p["velocity"] == "output" else (w - w_prev) / dt
+            def friction(v_w, v_dw):
+                s = v_w if p["velocity"] == "output" else v_dw
                 if not self.realistic:
                     return p["c"] * np.sign(s)
                 rise = 1 + p["stribeck"] * np.exp(-((s / p["vs"]) ** 2))
                 return p["c"] * rise * np.tanh(s / p["eps"]) + p["viscous"] * s
 
-            return friction
+            # a bound on |f| over the velocities a step can reach (viscous part:
+            # up to 100 x the velocity scale, far beyond any)
+            bound = p["c"] * (1 + p["stribeck"]) + p["viscous"] * 100 * p["v_scale"]
+            return none, friction, bound
         W, U = p["scale"], p["u_scale"]
 
-        def feedback(w, _):
+        def feedback(w):
             if p["shape"] == "cubic":
                 return U * (p["k"] * (w / W) ** 3 + p["k5"] * (w / W) ** 5)
             return p["k"] * U / W * (w - np.clip(w, -p["b"], p["b_hi"]))
 
-        return feedback
+        return feedback, none, 0.0
 
     def _output_map(self, w):
         p = self.params
@@ -468,6 +485,8 @@ def _draw_case(key, realism: str) -> dict | None:
         params["velocity"] = d.choice(("output", "derivative"))
         rate = np.abs(np.diff(w_nom_est)) / dt
         V = W if params["velocity"] == "output" else np.quantile(rate, 0.98)
+        params["v_scale"] = float(V)
+        params["v_scale"] = float(V)
         params["c"] = d.uniform(0.05, 0.3) * float(np.std(u_est))
         params["eps"] = d.uniform(0.005, 0.02) * V
         params["stribeck"] = d.uniform(0.0, 0.5) if realistic else 0.0

@@ -281,15 +281,14 @@ def feedback_scan(
     b: Array,
     a: Array,
     s: Float[Array, " B"],
-    state: tuple[Array, Array],
+    z: Float[Array, " n"],
     phi: Callable[[Array], Array],
     friction: Callable[[Array, Array], Array],
     bound: Float[Array, ""],
     dt: Float[Array, ""],
-) -> tuple[tuple[Array, Array], Float[Array, " B"]]:
-    """The filter with the fed-back forces subtracted from its input, from
-    `state = (filter state, previous output)`: `(state_end, w)` (chains over
-    blocks like `filter_scan`).
+) -> tuple[Float[Array, " n"], Float[Array, " B"]]:
+    """The filter with the fed-back forces subtracted from its input, from the
+    filter state `z`: `(z_end, w)` (chains over blocks like `filter_scan`).
 
     At step $k$: $\\hat w_k = z_0 + b_0 s_k$ and $s'_k = s_k - \\phi(\\hat w_k)$
     (explicit); the friction acts on the velocity over the step, $w_{k+1}$ and
@@ -301,8 +300,7 @@ def feedback_scan(
     then one Newton step, which carries the tangents of the implicit function.
     """
 
-    def step(carry, sk):
-        z, _ = carry
+    def step(z, sk):
         w_hat = b[0] * sk + z[0]
         s2 = sk - phi(w_hat)
         a_w, b_w = z[1] - a[1] * z[0], b[1] - a[1] * b[0]
@@ -323,10 +321,9 @@ def feedback_scan(
         root = lax.stop_gradient(0.5 * (lo + hi))
         g0, slope = jax.jvp(g, (root,), (jnp.ones_like(root),))
         uk = root - g0 / slope
-        z, yk = _df2t_step(b, a, z, uk)
-        return (z, yk), yk
+        return _df2t_step(b, a, z, uk)
 
-    return lax.scan(step, state, s, unroll=1)
+    return lax.scan(step, z, s, unroll=1)
 
 
 def feedback_arguments(p: Float[Array, " S"], case: CaseArrays) -> tuple:
@@ -352,25 +349,22 @@ def linear_part(
     b: Array,
     a: Array,
     u: Float[Array, " B"],
-    state: tuple[Array, Array],
+    z: Float[Array, " n"],
     p: Float[Array, " S"],
     case: CaseArrays,
     feedback: bool | Bool[Array, ""] = True,
-) -> tuple[tuple[Array, Array], Float[Array, " B"]]:
-    """The linear block from `state = (filter state, previous output)`, with the
+) -> tuple[Float[Array, " n"], Float[Array, " B"]]:
+    """The linear block from the filter state `z`: `(z_end, w)`, with the
     feedback loop (`feedback_scan`) or, for `feedback=False`, without it
-    (`filter_scan`, exact when every feedback slot is neutral; the previous
-    output is then carried unchanged)."""
+    (`filter_scan`, exact when every feedback slot is neutral)."""
 
-    def loop(u, state):
-        return feedback_scan(b, a, u, state, *feedback_arguments(p, case), case.dt)
+    def loop(u, z):
+        return feedback_scan(b, a, u, z, *feedback_arguments(p, case), case.dt)
 
-    def plain(u, state):
-        z, w_prev = state
-        z, w = filter_scan(b, a, u, z)
-        return (z, w_prev), w
+    def plain(u, z):
+        return filter_scan(b, a, u, z)
 
-    return switch(feedback, loop, plain, u, state)
+    return switch(feedback, loop, plain, u, z)
 
 
 def memory_scan(
@@ -484,7 +478,7 @@ def simulate_with_filter(
     already at hand (a fit has it; the matrix exponential is not repeated)."""
     v = delay(v, tau)
     x = switch(memory, input_memory, lambda v, *_: v, v, *memory_arguments(p, case))
-    rest = (jnp.zeros(a.shape[0] - 1, v.dtype), jnp.zeros((), v.dtype))
+    rest = jnp.zeros(a.shape[0] - 1, v.dtype)
     _, w = linear_part(b, a, static_part(x, p, case, table), rest, p, case, feedback)
     return output_part(w, p, case)
 

@@ -69,15 +69,15 @@ def nominal_mask(row: Row, case: CaseArrays) -> Bool[Array, " P"]:
 
 def _block_model(p, b, a, state, vb, case, memory, table, feedback):
     """One block of the estimation record through the augmented model, from the
-    scans' `state = (rate-limited input, play output, filter state, previous
-    output)` (`augmented.linear_part`: the feedback loop or the plain filter)."""
-    xr, xb, z, w_prev = state
+    scans' `state = (rate-limited input, play output, filter state)`
+    (`augmented.linear_part`: the feedback loop or the plain filter)."""
+    xr, xb, z = state
     skip = lambda v, s, *_: (s, v)  # noqa: E731
     args = (vb, (xr, xb), *memory_arguments(p, case))
     (xr, xb), x = switch(memory, memory_scan, skip, *args)
     u = static_part(x, p, case, table)
-    (z, w_prev), w = linear_part(b, a, u, (z, w_prev), p, case, feedback)
-    return (xr, xb, z, w_prev), output_part(w, p, case)
+    z, w = linear_part(b, a, u, z, p, case, feedback)
+    return (xr, xb, z), output_part(w, p, case)
 
 
 def _coefficients(theta, row, case):
@@ -130,8 +130,7 @@ def _normal_equations(
         lambda t: jax.jvp(lambda th: _coefficients(th, row, case), (theta,), (t,)),
         out_axes=(None, 0),
     )(basis)
-    zero = jnp.zeros((), theta.dtype)
-    state0 = (vd[0], vd[0], jnp.zeros(a.shape[0] - 1, theta.dtype), zero)
+    state0 = (vd[0], vd[0], jnp.zeros(a.shape[0] - 1, theta.dtype))
 
     def body(carry):
         k, state, dstate, sse, H, g = carry

@@ -277,6 +277,9 @@ def _df2t_step(b: Array, a: Array, z: Array, uk: Array) -> tuple[Array, Array]:
     return z, yk
 
 
+BISECTIONS = 20  # halvings of the friction step's bracket (`feedback_scan`)
+
+
 def feedback_scan(
     b: Array,
     a: Array,
@@ -296,8 +299,12 @@ def feedback_scan(
     $w_{k+1} = z_1 - a_1 z_0 + (b_1 - a_1 b_0) u_k$ up to $b_0 u_{k+1}$), so $u_k$
     solves $u = s'_k - $ `friction(v_w(u), v_dw(u))` (implicit, the discrete
     form of Coulomb friction that sticks instead of chattering). The root lies in
-    $s'_k \\pm$ `bound` ($|f| \\le c_w + c_{dw}$): 40 bisections (no tangents),
-    then one Newton step, which carries the tangents of the implicit function.
+    $s'_k \\pm$ `bound` ($|f| \\le c_w + c_{dw}$): `BISECTIONS` halvings and a
+    Newton step (no tangents), then a Newton step that carries the tangents of
+    the implicit function. After 20 halvings the velocity is within
+    $2 \\cdot 10^{-6}$ of the bracket's velocity span, far inside the smoothing
+    width ($10^{-3}$ of the velocity scale), where Newton converges
+    quadratically: two steps reach rounding.
     """
 
     def step(z, sk):
@@ -317,10 +324,13 @@ def feedback_scan(
 
         c = lax.stop_gradient(bound)
         lo, hi = lax.stop_gradient(s2) - c, lax.stop_gradient(s2) + c
-        lo, hi = lax.fori_loop(0, 40, bisect, (lo, hi))
-        root = lax.stop_gradient(0.5 * (lo + hi))
-        g0, slope = jax.jvp(g, (root,), (jnp.ones_like(root),))
-        uk = root - g0 / slope
+        lo, hi = lax.fori_loop(0, BISECTIONS, bisect, (lo, hi))
+
+        def newton(u):
+            g0, slope = jax.jvp(g, (u,), (jnp.ones_like(u),))
+            return u - g0 / slope
+
+        uk = newton(lax.stop_gradient(newton(0.5 * (lo + hi))))
         return _df2t_step(b, a, z, uk)
 
     return lax.scan(step, z, s, unroll=1)

@@ -21,7 +21,7 @@ $c^2 (\varepsilon/V)\int_0^\infty (1 - \tanh t)^2\,dt = c^2 (2\ln 2 - 1)\,\varep
 so this width misses a textbook Coulomb law $c\,\mathrm{sign}(s)$ by
 $0.020\,c$ in RMS (2 % of the effect) while keeping $f$ differentiable. The
 implicit step keeps so steep a law well conditioned ($\partial_u$ of the
-equation is $\ge 1$); an explicit one (the force from the previous step's
+equation is $\ge 1$ when a unit input raises the next output, $b_1 > 0$); an explicit one (the force from the previous step's
 velocity) chattered about zero velocity with a gain $c/\varepsilon$ and made a
 fit's SSE depend on rounding (83 % apart between one and two devices after 6
 steps, `tests/diagnosis/test_diagnosis_fit.py`).

@@ -23,7 +23,10 @@ Decisions, in order:
 
 - *deterministic gap*: the best candidate (lowest validation MSE) against the
   nominal simulation; if significant, a *structural* effect is named when the best
-  structural candidate is significant against the re-fitted nominal model
+  structural candidate (lowest validation MSE, unless its validation improvement
+  over the lowest-estimation-SSE structural candidate has $z \\le 2$, the
+  confirmation level below: then that one) is significant against the re-fitted
+  nominal model
   (`parameter_mismatch`), or when the nested likelihood-ratio test on the
   estimation record names one (`_nested_lr`: every structural candidate nests the
   re-fit, so with white noise $\\Delta S / \\hat\\sigma^2 \\sim \\chi^2_k$; far more
@@ -117,6 +120,7 @@ SHRINK_EXPLAINED = 0.5
 DETERMINISTIC_NAMES = tuple(e.name for e in DETERMINISTIC)
 NOISE_NAMES = ("drift", "coloured_noise")
 EFFECT_SLOT_NAMES = {e.name: tuple(e.slots) for e in DETERMINISTIC if e.slots}
+FRICTION = next(e for e in DETERMINISTIC if e.name == "friction")
 
 
 @dataclass
@@ -165,6 +169,10 @@ def _params(prep: Prepared, fit: dict, row: int, effect: str) -> dict:
         i = names.index(name)
         if free[i]:
             out[name] = {"value": float(phys[i]), "std": float(std_full[i])}
+    if effect == "friction":
+        used = {n for n in EFFECT_SLOT_NAMES[effect] if free[names.index(n)]}
+        # which velocity the friction acts on: "output" (s = w) or "derivative"
+        out["velocity"] = {"value": FRICTION.velocity(used), "std": 0.0}
     if effect == "time_delay":
         tau = int(prep.rows[row][1].tau)
         out["tau_samples"] = {"value": tau, "std": 0.0}
@@ -292,6 +300,17 @@ def attribute(prep: Prepared, fit: dict) -> Attribution:
         pm = cands["parameter_mismatch"]
         structural = [c for c in det if c.effect != "parameter_mismatch"]
         best_s = min(structural, key=lambda c: c.gap_after)
+        # Two structural classes that validation cannot tell apart (the best one's
+        # held-out improvement over the estimation record's best at most the
+        # confirmation level Z_CONFIRM): the estimation record, which fitted
+        # them, decides (e.g. stick-slip friction against backlash under
+        # coloured noise).
+        best_e = min(structural, key=lambda c: sse[c.row])
+        if best_e is not best_s:
+            z_tie = improvement_z(best_e.residual, best_s.residual)
+            tests["structural_tie"] = {"z": z_tie, "validation": best_s.effect}
+            if not z_tie > Z_CONFIRM:
+                best_s = best_e
         s_sig, z_s = sig(pm.residual, best_s.residual, floor_best**2, z_star=Z_STRUCT)
         p_sig, z_p = sig(r_before, pm.residual, floor_best**2)
         tests["structural_vs_refit"] = {

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from hamjax.cli.main import main
+from hamjax.diagnosis.attribute import DETERMINISTIC_NAMES, NOISE_NAMES
 from hamjax.io import model_to_dict, write_csv, write_json
 from hamjax.papers.gap.blind import make_case, score
 from hamjax.papers.gap.demo_cases import tiny_case
@@ -85,7 +86,8 @@ def test_diagnose_contract_and_multi_case_with_a_bad_case(tmp_path, capsys):
         "where",
     } <= set(r)
     assert r["effect"] == "saturation"
-    assert len(r["ranking"]) == 11  # every candidate (dead_zone included: identity map)
+    # every candidate (dead_zone included: identity map)
+    assert len(r["ranking"]) == len(DETERMINISTIC_NAMES) + len(NOISE_NAMES)
     assert r["gap_after"] < r["gap_before"]
     other_r = json.loads((tmp_path / "out" / "other" / "diagnosis.json").read_text())
     assert other_r["effect"] == "dead_zone"

@@ -17,10 +17,10 @@ def efficiency_summary(
 
     **Returns:** a JSON-able dict of lists. `efficiency_se` is the Monte Carlo
     standard error of the efficiency by the delta method,
-    $\text{se}(\hat e) = \hat e\,\text{se}(\widehat{\text{MSE}})/\widehat{\text{MSE}}$
-    with $\text{se}(\widehat{\text{MSE}})$ the sample std of the squared errors over
-    $\sqrt R$ (about $\hat e\sqrt{2/R}$ for Gaussian errors); `efficiency_ci` is the
-    95% interval $\text{CRLB}/(\widehat{\text{MSE}} \pm 1.96\,\text{se})$.
+    $\\text{se}(\\hat e) = \\hat e\\,\\text{se}(\\widehat{\\text{MSE}})/\\widehat{\\text{MSE}}$
+    with $\\text{se}(\\widehat{\\text{MSE}})$ the sample std of the squared errors over
+    $\\sqrt R$ (about $\\hat e\\sqrt{2/R}$ for Gaussian errors); `efficiency_ci` is the
+    95% interval $\\text{CRLB}/(\\widehat{\\text{MSE}} \\pm 1.96\\,\\text{se})$.
     """
     e = np.asarray(estimates)[np.asarray(ok)] - np.asarray(truth)[None, :]
     R = e.shape[0]

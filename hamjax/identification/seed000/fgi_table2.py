@@ -18,6 +18,7 @@ import math
 from typing import Literal
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Bool, Complex, Float, Int
 
@@ -72,47 +73,54 @@ def steady_cycle_values(
     tol = 1e-9 * jnp.max(jnp.abs(w))
     if cycle_stderr is not None:
         tol = tol + z * math.sqrt(2.0) * jnp.max(jnp.asarray(cycle_stderr, float))
-    rising = [0 < j < n for j in range(m)]
-    same = [rising[j] == rising[j - 1] for j in range(m)]
+    rising = (jnp.arange(m) > 0) & (jnp.arange(m) < n)
+    same = rising == jnp.roll(rising, 1)
+    w_prev = jnp.roll(w, 1)  # W_{j-1}, cyclically
+    moved = jnp.abs(w - w_prev) > tol
+
     # Period 1: the border of step j's direction is known at V_j (= W_j) iff the
     # step moved (W_j != W_{j-1}) or followed that border from V_{j-1}; step 0
     # (v_M to v_m in (3)) put point 1 on f_d(v_m).
-    known = [jnp.asarray(True)]
-    for j in range(1, m):
-        moved = jnp.abs(w[j] - w[j - 1]) > tol
-        known.append(moved | (known[j - 1] & same[j]))
+    def _known(prev, xs):
+        mv, sm = xs
+        k = mv | (prev & sm)
+        return k, k
+
+    _, known = jax.lax.scan(_known, jnp.asarray(True), (moved[1:], same[1:]))
+    known = jnp.concatenate([jnp.ones(1, bool), known])
     # Orientation: sign of the first move of the ascending path (+1 if none).
-    sign = jnp.asarray(1.0)
-    for j in reversed(range(1, n)):
-        d = w[j] - w[j - 1]
-        sign = jnp.where(jnp.abs(d) > tol, jnp.sign(d), sign)
-    prev_u, prev_on = w, jnp.stack(known)
-    ok, broken, steady = jnp.asarray(False), jnp.asarray(False), w
-    for _ in range(max_periods):
-        x, on = prev_u[m - 1], prev_on[m - 1]
-        matched, fail = jnp.asarray(False), jnp.asarray(False)
-        us, ons = [], []
-        for j in range(m):
-            follow = on & same[j]
-            d = sign if rising[j] else -sign  # d*(f - u) >= 0: the border is reached
-            onto = d * (w[j] - x) >= -tol
-            # Border unknown at V_j: period 1 stayed at W_{j-1} off it, so
-            # d*f(V_j) < d*W_{j-1}; u stays if d*u >= d*W_{j-1}, else it is unknown.
-            stays = d * (x - w[j - 1]) >= -tol
-            take = known[j] & (follow | onto)
-            unknown = ~known[j] & (follow | ~stays)
-            u = jnp.where(matched, prev_u[j], jnp.where(take, w[j], x))
-            on = jnp.where(matched, prev_on[j], take)
-            fail = fail | (~matched & unknown)
-            matched = matched | ((jnp.abs(u - prev_u[j]) <= tol) & (on == prev_on[j]))
-            us.append(u)
-            ons.append(on)
-            x = u
+    up = moved & rising
+    sign = jnp.where(jnp.any(up), jnp.sign((w - w_prev)[jnp.argmax(up)]), 1.0)
+    d = jnp.where(rising, sign, -sign)  # d*(f - u) >= 0: the border is reached
+
+    def _step(carry, xs):
+        x, on, matched, fail = carry
+        w_j, w_jm1, known_j, same_j, d_j, prev_u, prev_on = xs
+        follow = on & same_j
+        onto = d_j * (w_j - x) >= -tol
+        # Border unknown at V_j: period 1 stayed at W_{j-1} off it, so
+        # d*f(V_j) < d*W_{j-1}; u stays if d*u >= d*W_{j-1}, else it is unknown.
+        stays = d_j * (x - w_jm1) >= -tol
+        take = known_j & (follow | onto)
+        unknown = ~known_j & (follow | ~stays)
+        u = jnp.where(matched, prev_u, jnp.where(take, w_j, x))
+        on = jnp.where(matched, prev_on, take)
+        fail = fail | (~matched & unknown)
+        matched = matched | ((jnp.abs(u - prev_u) <= tol) & (on == prev_on))
+        return (u, on, matched, fail), (u, on)
+
+    def _period(carry, _):
+        prev_u, prev_on, ok, broken, steady = carry
+        init = (prev_u[m - 1], prev_on[m - 1], jnp.asarray(False), jnp.asarray(False))
+        xs = (w, w_prev, known, same, d, prev_u, prev_on)
+        (_, _, matched, fail), (us, ons) = jax.lax.scan(_step, init, xs)
         broken = broken | fail  # a step undecided: later periods are unknown too
         newly = matched & ~broken & ~ok
-        steady = jnp.where(newly, jnp.stack(us), steady)
-        ok = ok | newly
-        prev_u, prev_on = jnp.stack(us), jnp.stack(ons)
+        steady = jnp.where(newly, us, steady)
+        return (us, ons, ok | newly, broken, steady), None
+
+    init = (w, known, jnp.asarray(False), jnp.asarray(False), w)
+    (_, _, ok, _, steady), _ = jax.lax.scan(_period, init, None, length=max_periods)
     return steady, ok
 
 

@@ -13,6 +13,11 @@ class RESULTS(eqx.Enumeration):
         "The estimates are inconsistent with the named nonlinearity structure."
     )
     not_exciting = "The input does not excite the quantities to be identified."
+    cycle_not_rebuilt = (
+        "FGI cannot rebuild the periodic backlash output u from the NBBI points: the "
+        "input reverses before the output reaches a border whose value at that level "
+        "the first cycle did not show (seed 000 Table 2 needs u; try other levels)."
+    )
     degenerate = (
         "The output record is constant to rounding: it carries no response to "
         "identify (a dead sensor?)."

@@ -15,8 +15,12 @@ def efficiency_summary(
     - `crlb_var`: the bound's diagonal, shape `(p,)`.
     - `ok`: shape `(R,)`, the realisations kept (successful estimates).
 
-    **Returns:** a JSON-able dict of lists; `efficiency_ci` is a 95% interval from
-    the Monte Carlo standard error of the MSE (delta method).
+    **Returns:** a JSON-able dict of lists. `efficiency_se` is the Monte Carlo
+    standard error of the efficiency by the delta method,
+    $\\text{se}(\\hat e) = \\hat e\\,\\text{se}(\\widehat{\\text{MSE}})/\\widehat{\\text{MSE}}$
+    with $\\text{se}(\\widehat{\\text{MSE}})$ the sample std of the squared errors over
+    $\\sqrt R$ (about $\\hat e\\sqrt{2/R}$ for Gaussian errors); `efficiency_ci` is the
+    95% interval $\\text{CRLB}/(\\widehat{\\text{MSE}} \\pm 1.96\\,\\text{se})$.
     """
     e = np.asarray(estimates)[np.asarray(ok)] - np.asarray(truth)[None, :]
     R = e.shape[0]
@@ -28,6 +32,7 @@ def efficiency_summary(
             "std": nan,
             "rmse": nan,
             "efficiency": nan,
+            "efficiency_se": nan,
             "efficiency_ci": [nan, nan],
             "crlb_std": nan,
         }
@@ -44,5 +49,6 @@ def efficiency_summary(
         "rmse_mcse": (mse_se / (2 * np.sqrt(mse))).tolist(),
         "crlb_std": np.sqrt(crlb_var).tolist(),
         "efficiency": eff.tolist(),
+        "efficiency_se": (eff * mse_se / mse).tolist(),
         "efficiency_ci": [lo.tolist(), hi.tolist()],
     }

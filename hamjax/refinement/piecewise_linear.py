@@ -119,6 +119,36 @@ class PiecewiseLinearParametrisation(AbstractDiscreteParametrisation):
         h = jnp.stack([l1 - k1 * d1, l2 - k2 * d2])
         return jnp.concatenate([phys[: 2 * n + 2], h])
 
+    def place_breakpoints(self, theta: Params, v: Signal, y: Signal) -> Params:
+        """Each $d_j$ moved to the midpoint of the gap between input values that
+        gives the exact map the lowest residual, among its own gap and the two
+        next to it, with $h_j = l_j - k_j d_j$ kept (`refine` calls it before the
+        exact stage). The exact cost is flat in $d_j$ inside a gap and jumps at an
+        input value, where the last smoothed stage may leave $d_j$: the exact
+        stage cannot move it across."""
+        s = jnp.sort(v)
+        n0 = 2 * self.order - 1
+        exact = self.with_smoothing(None) if self.smoothing is not None else self
+
+        def rss(th):
+            return jnp.sum((y - exact.predict(th, v)) ** 2)
+
+        def mid(lo, hi):  # midpoint of the gap (s[lo], s[hi]), clipped to the data
+            lo, hi = jnp.clip(lo, 0, s.shape[0] - 1), jnp.clip(hi, 0, s.shape[0] - 1)
+            return (s[lo] + s[hi]) / 2
+
+        for j in range(2):
+            d, k = theta[n0 + 2 + j], theta[n0 + j]
+            i = jnp.searchsorted(s, d, side="left")  # s[i-1] < d <= s[i]
+            above = jnp.searchsorted(s, s[jnp.minimum(i, s.shape[0] - 1)], "right")
+            below = jnp.searchsorted(s, s[jnp.maximum(i - 1, 0)], "left") - 1
+            candidates = jnp.stack([mid(i - 1, i), mid(i, above), mid(below, i - 1)])
+            # d_j -> c with l_j -> l_j + k_j (c - d_j): the same h_j.
+            shift = jnp.zeros_like(theta).at[n0 + 2 + j].set(1.0).at[n0 + 4 + j].set(k)
+            trials = theta[None, :] + (candidates - d)[:, None] * shift[None, :]
+            theta = trials[jnp.argmin(jax.vmap(rss)(trials))]
+        return theta
+
     def is_valid(self, theta: Params) -> Bool[Array, ""]:
         a, _, m = self._split(theta)
         # Fig. 2 needs d2 <= 0 <= d1.

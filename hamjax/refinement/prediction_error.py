@@ -87,7 +87,9 @@ def refine(
     For parametrisations with a `with_smoothing(width)` method (a map that is not
     differentiable at its breakpoints), the fit is run with each width of
     `options.annealing` in turn, each started from the previous solution, and
-    finally with the exact map; the reported optimum is the exact map's.
+    finally with the exact map; the reported optimum is the exact map's. Where the
+    parametrisation has `place_breakpoints(theta, v, y)`, it places the breakpoints
+    in their gaps between input values before the exact stage.
 
     **Arguments:**
 
@@ -131,6 +133,8 @@ def refine(
         keep = jnp.all(jnp.isfinite(sol.value))
         theta = jnp.where(keep, sol.value, theta)
         steps = steps + sol.stats["num_steps"]
+    if hasattr(parametrisation, "place_breakpoints"):
+        theta = parametrisation.place_breakpoints(theta, v, y)
     sol = _solve(parametrisation, theta, v, y, options)
     theta = sol.value
     steps = steps + sol.stats["num_steps"]

@@ -10,12 +10,17 @@ import pytest
 from scipy import signal, stats
 
 import hamjax as hj
-from hamjax.identification.seed000.fgi_table2 import identify_fgi, trans_period_average
+from hamjax.identification.seed000.fgi_table2 import (
+    identify_fgi,
+    steady_cycle_values,
+    trans_period_average,
+)
 from hamjax.identification.seed000.fourier_13_22 import (
     piecewise_constant_coefficients,
     sampled_coefficients,
 )
 from hamjax.papers.seed000.border_shapes import SHAPES, cycle_points
+from hamjax.signals.staircase import staircase_cycle_levels
 
 
 LEVELS = np.array([-1.0, -0.5, 0.0, 0.5, 1.0])
@@ -223,6 +228,125 @@ def test_flat_cycle_is_not_exciting():
     y = np.ones(160)
     res = identify_fgi(y, np.ones(8), period_samples=80, periods=2, dt=0.1, throw=False)
     assert res.result == hj.RESULTS.not_exciting
+
+
+# ------------------------------------------------------- the periodic u (rebuilt)
+
+
+def _play(levels, fa, fd, periods):
+    """Hand-written play operator on the level indices (seed 000 Section II): a
+    step in the direction of the last move follows that border, otherwise the
+    point moves onto the border of the new direction iff it is reached (f_a >= u
+    rising, f_d <= u falling). Starts as (3) does: from the centre of the play at
+    v_M, then v_m. Returns u on the staircase (4a-b), one row per period."""
+    n = len(levels)
+    cycle = list(range(n)) + list(range(n - 2, 0, -1))
+    order = [n - 1] + cycle * periods
+    u, side, out = (fa[n - 1] + fd[n - 1]) / 2, None, []
+    for prev, i in zip(order[:-1], order[1:], strict=True):
+        up = i > prev
+        f = fa[i] if up else fd[i]
+        if (side == up) or (f >= u if up else f <= u):
+            u, side = f, up
+        else:
+            side = None  # a horizontal move, off both borders
+        out.append(u)
+    return np.array(out).reshape(periods, -1)
+
+
+def _simulated(backlash, levels, periods=3):
+    """The backlash model of hamjax.models on (3) then `periods` cycles of (24)."""
+    cyc = np.asarray(staircase_cycle_levels(levels))
+    v = np.concatenate([levels[-1:], levels[:1], *[cyc] * periods])
+    u = np.asarray(hj.apply_nonlinearity(backlash, jnp.asarray(v)))
+    return u[2:].reshape(periods, -1)
+
+
+# n = 5 levels where the ascending border rises above f_d(v_m) at V_2 and then
+# falls (non-monotone) and the descending border stays above the output: the
+# descending path never meets f_d, so from the second period u stays at its V_2
+# value on the last (inner) segment instead of returning to f_d(v_m).
+INNER_LEVELS = np.array([-1.0, -0.5, 0.0, 0.5, 1.0])
+INNER_FA = np.array([-2.0, 1.0, 0.6, 0.2, -0.2])
+INNER_FD = np.array([0.0, 2.0, 2.0, 2.0, 2.0])
+
+
+@pytest.mark.parametrize("n", [3, 4, 6, 9])
+@pytest.mark.parametrize("sign", [1.0, -1.0])
+def test_steady_u_is_the_nbbi_cycle_when_the_path_meets_f_d(n, sign):
+    # Every shape of Remark 1b: the second and third periods of the model equal
+    # the first cycle, and the rebuild returns it (also after (kF, G/k), k < 0).
+    levels = np.linspace(-1.0, 1.0, n)
+    for name in sorted(SHAPES):
+        u = sign * _simulated(SHAPES[name](), levels)
+        values, ok = steady_cycle_values(u[0])
+        assert bool(ok), name
+        np.testing.assert_allclose(values, u[-1], atol=1e-12, err_msg=name)
+        np.testing.assert_allclose(u[0], u[-1], atol=1e-12, err_msg=name)
+
+
+@pytest.mark.parametrize("sign", [1.0, -1.0])
+def test_steady_u_when_the_input_reverses_before_the_border(sign):
+    bl = hj.Backlash.from_table(INNER_LEVELS, INNER_FA, INNER_FD)
+    u = _simulated(bl, INNER_LEVELS)
+    ref = _play(INNER_LEVELS, INNER_FA, INNER_FD, periods=3)
+    np.testing.assert_allclose(u, ref, atol=1e-12)  # the two references agree
+    assert abs(u[0, 0] - u[1, 0]) > 0.1  # the first cycle is not the steady one
+    values, ok = steady_cycle_values(sign * u[0])
+    assert bool(ok)
+    np.testing.assert_allclose(values, sign * u[-1], atol=1e-12)
+    # FGI with "G = 1" (output = u, periodic): G-hat = 1 exactly from the rebuilt
+    # u; the NBBI staircase itself (the old assumption) is off.
+    P = 8 * 40
+    y = np.tile(np.repeat(sign * u[-1], P // 8), 3)
+    kw = dict(period_samples=P, periods=3, dt=0.01, quadrature="hold")
+    res = identify_fgi(y, sign * u[0], **kw)
+    keep = np.asarray(res.keep)
+    assert keep.any()
+    np.testing.assert_allclose(np.asarray(res.g)[keep], 1.0, atol=1e-10)
+    np.testing.assert_allclose(res.cycle_values, sign * u[-1], atol=1e-12)
+    T = P * 0.01
+    a, b = piecewise_constant_coefficients(
+        sign * u[0], jnp.arange(9) * (T / 8), 2 * np.pi / T, res.harmonics[:1]
+    )
+    old = (res.alpha[0] - 1j * res.beta[0]) / (a[0] - 1j * b[0])
+    assert abs(complex(old) - 1) > 0.05
+
+
+def test_steady_u_that_cannot_be_rebuilt_is_reported():
+    # As above but f_a(V_2) below f_d(v_m): the first cycle stays at f_d(v_m) at
+    # V_2, so it never shows f_a(V_2); in the steady state u arrives at V_2 below
+    # f_d(v_m), and whether it reaches f_a(V_2) is not in the NBBI points.
+    fa = np.array([-2.0, -1.0, 1.0, 0.5, -0.5])
+    bl = hj.Backlash.from_table(INNER_LEVELS, fa, INNER_FD)
+    u = _simulated(bl, INNER_LEVELS)
+    np.testing.assert_allclose(u, _play(INNER_LEVELS, fa, INNER_FD, 3), atol=1e-12)
+    assert abs(u[0, 0] - u[-1, 0]) > 0.1
+    _, ok = steady_cycle_values(u[0])
+    assert not bool(ok)
+    P = 8 * 40
+    y = np.tile(np.repeat(u[-1], P // 8), 3)
+    kw = dict(period_samples=P, periods=3, dt=0.01)
+    res = identify_fgi(y, u[0], throw=False, **kw)
+    assert res.result == hj.RESULTS.cycle_not_rebuilt
+    with pytest.raises(Exception, match="cannot rebuild the periodic backlash output"):
+        identify_fgi(y, u[0], **kw)
+
+
+def test_steady_u_with_noisy_points_and_their_stderr():
+    # NBBI-like estimates (noise 1e-3, stated stderr): the flat inner segment is
+    # flat within z standard errors, and the rebuilt u is the steady one to the
+    # noise; a cycle that repeats comes back unchanged.
+    noise = 1e-3 * jr.normal(jr.key(3), (8,))
+    bl = hj.Backlash.from_table(INNER_LEVELS, INNER_FA, INNER_FD)
+    u = _simulated(bl, INNER_LEVELS)
+    values, ok = steady_cycle_values(u[0] + noise, cycle_stderr=np.full(8, 1e-3))
+    assert bool(ok)
+    np.testing.assert_allclose(values, u[-1], atol=5e-3)
+    w = _simulated(SHAPES["straight"](), INNER_LEVELS)[0] + noise
+    values, ok = steady_cycle_values(w, cycle_stderr=np.full(8, 1e-3))
+    assert bool(ok)
+    np.testing.assert_allclose(values, w, atol=1e-14)
 
 
 # ----------------------------------------------------------------------------- CLI

@@ -151,3 +151,34 @@ def test_plot_closed_form_vs_refined(mplcleanup):
         assert isinstance(plot_refinement_study(summary, which=which), Figure)
     with pytest.raises(ValueError, match="which"):
         plot_refinement_study(summary, which="bias")
+
+
+@pytest.mark.slow
+def test_pl_study_tiny(tmp_path):
+    import jax.random as jr
+
+    from hamjax.papers.seed001.studies import refinement_pl as study
+
+    args = argparse.Namespace(
+        samples=[200],
+        hold=3,
+        snrs=[30.0],
+        start_std=0.01,
+        solver="levenberg-marquardt",
+        timing=False,
+    )
+    summary = study.run(
+        jr.key(0), realisations=4, chunk=4, out=tmp_path, quiet=True, args=args
+    )
+    saved = json.loads((tmp_path / "refinement_pl.json").read_text())
+    assert saved["parameters"] == ["a1", "a2", "b1", "b2", "k1", "k2", "h1", "h2"]
+    assert (tmp_path / "refinement_pl_efficiency.png").stat().st_size > 0
+    config = summary["configs"][0]
+    assert config["refined_failure_rate"] == 0.0
+    refined = config["refined"]
+    assert len(refined["efficiency_se"]) == len(saved["parameters"])
+    # From a start 0.01 (0.1 on the map) off, the refined (a, b) are far closer
+    # to the truth than the start.
+    assert np.all(
+        np.asarray(refined["rmse"][:4]) < np.asarray(config["start"]["rmse"][:4])
+    )

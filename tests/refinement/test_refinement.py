@@ -322,3 +322,56 @@ def test_steiglitz_mcbride_noise_free_is_exact():
     p, theta, v, w = _seed001_table()
     est = steiglitz_mcbride_table(v, w, p.levels, jnp.zeros(2), iterations=5)
     assert np.allclose(est, p.to_physical(theta), rtol=0, atol=1e-9)
+
+
+def test_efficiency_se_is_the_delta_method_one():
+    # Gaussian errors of variance equal to the bound: MSE-hat is chi2_R/R, so the
+    # efficiency's standard error is sqrt(2/R) to O(1/R). The estimate (the sample
+    # std of e^2 over sqrt(R), times eff/MSE) has a relative error of about
+    # sqrt((mu4 - v^2)/(4 v^2 R)) with v = 2, mu4 = 60 the variance and central
+    # fourth moment of e^2 (unit variance): sqrt(3.5/R) = 0.030 at R = 4000; rtol
+    # 0.2 is over 6 of it.
+    from hamjax.refinement.efficiency import efficiency_summary
+
+    R = 4000
+    crlb = np.array([1.0, 4.0])
+    e = np.asarray(jr.normal(jr.key(11), (R, 2))) * np.sqrt(crlb)
+    s = efficiency_summary(e, np.zeros(2), crlb, np.ones(R, bool))
+    se = np.asarray(s["efficiency_se"])
+    eff = np.asarray(s["efficiency"])
+    np.testing.assert_allclose(se / eff, np.sqrt(2 / R), rtol=0.2)
+    # and the efficiency itself is 1 within 4.5 of its standard errors
+    assert np.all(np.abs(eff - 1) < 4.5 * se), (eff, se)
+    lo, hi = s["efficiency_ci"]
+    assert np.all((np.asarray(lo) < eff) & (eff < np.asarray(hi)))
+
+
+@pytest.mark.slow
+def test_breakpoint_next_to_an_input_value_is_placed_in_its_gap():
+    # The study's random staircase puts an input value 0.009 above d1 = 1, inside
+    # the last smoothing width (0.01 x range = 0.12): the smoothed fit leaves d1
+    # near it, and the exact stage alone cannot cross it. With place_breakpoints
+    # the noise-free fit is exact: the regular parameters are the truth and both
+    # d_j split the input values as the true ones do.
+    from hamjax.papers.seed001.plants import paper_case
+    from hamjax.papers.seed001.studies.refinement_pl import make_record
+
+    v, w, p, theta = make_record(paper_case(), samples=1000, hold=3)
+    values = np.unique(np.asarray(v))
+    assert np.min(np.abs(values - 1.0)) < 0.12  # the case this test is about
+    scale = jnp.array([0.03, 0.03, 0.03, 0.3, 0.3, 0.3, 0.3, 0.3, 0.3])
+    theta0 = theta + scale * jr.normal(jr.fold_in(jr.key(7), 0), theta.shape)
+    res = refine(p, theta0, v, w)
+    assert float(res.rss) < 1e-16
+    np.testing.assert_allclose(
+        p.regular_physical(res.theta), p.regular_physical(theta), rtol=0, atol=1e-8
+    )
+    d1, d2 = float(res.estimate[6]), float(res.estimate[7])
+    assert np.array_equal(values > d1, values > 1.0)
+    assert np.array_equal(values < d2, values < -2.0)
+    # The move keeps h_j = l_j - k_j d_j, so it does not change the fit inside a gap.
+    moved = p.place_breakpoints(theta, v, w)
+    np.testing.assert_allclose(
+        p.regular_physical(moved), p.regular_physical(theta), atol=1e-12
+    )
+    np.testing.assert_allclose(p.predict(moved, v), w, atol=1e-10)

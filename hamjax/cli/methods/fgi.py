@@ -219,6 +219,8 @@ def identify(args: argparse.Namespace) -> int:
             quadrature=args.quadrature,
             throw=False,
         )
+        if res.result == RESULTS.cycle_not_rebuilt:
+            raise UserInputError(f"omega = {b['omega']:g}: {RESULTS[res.result]}")
         if res.result != RESULTS.successful:
             raise UserInputError(
                 f"{folder / 'data.csv'}: omega = {b['omega']:g}: no usable harmonic "

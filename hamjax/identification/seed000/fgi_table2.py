@@ -5,8 +5,10 @@ Hammerstein systems with backlash nonlinearity*, Section IV, Table 2,
 Proposition 2 and Remark 2.
 
 The periodic staircase (24) visits the NBBI levels in the order of (4a-b), so the
-backlash output $u$ is the known periodic staircase of the NBBI values (9)-(11).
-Its exact Fourier coefficients $(a_k, b_k)$ (13) and those $(\alpha_k(M),
+backlash output $u$ is a periodic staircase on the same levels. It is the staircase
+of the NBBI values (9)-(11) when the descending path meets $f_d$ by $v_m$; in
+general `steady_cycle_values` rebuilds its steady-state period from them by the
+play operator's logic (or says that it cannot). Its exact Fourier coefficients $(a_k, b_k)$ (13) and those $(\alpha_k(M),
 \beta_k(M))$ (22) of the trans-period average $y_f(t, M)$ (20) of the steady-state
 output give $\hat G_M(jk\omega)$ by (25)-(26), i.e.
 $\hat G_M = (\alpha_k - j\beta_k)/(a_k - j b_k)$.
@@ -16,6 +18,7 @@ import math
 from typing import Literal
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Bool, Complex, Float, Int
 
@@ -27,6 +30,100 @@ from .fourier_13_22 import (
 )
 
 
+def steady_cycle_values(
+    cycle_values: Float[ArrayLike, " m"],
+    *,
+    cycle_stderr: Float[ArrayLike, " m"] | None = None,
+    z: float = 4.0,
+    max_periods: int = 3,
+) -> tuple[Float[Array, " m"], Bool[Array, ""]]:
+    r"""The backlash output over one steady-state period of (24) from NBBI's points.
+
+    NBBI measures the first cycle $W_1..W_{2n-2}$ after (3), which leaves point 1 on
+    $f_d(v_m)$ (Fig. 5). In the periodic regime of (24) the input falls from $V_2$
+    to $V_1$ at each period start: if the descending path has met $f_d$ by then, or
+    if $f_d(v_m) = W_1$ lies below the output at $V_2$, the point returns to
+    $(V_1, W_1)$ and the cycle repeats ($u$ is the staircase of the $W_i$).
+    Otherwise the input reverses before the output reaches the border: $u$ stays
+    at its value at $V_2$ (the inner, horizontal segment) and the next period
+    differs from the first. The periods are then rebuilt by the play operator's
+    rules (seed 000, Section II; `hamjax.models.Backlash`): a step in the
+    direction of the last move follows that border; otherwise the point moves onto
+    the border $f$ of the new direction iff $f(V) \ge u$ rising ($\le u$ falling),
+    else stays. The borders are known at the levels where the first cycle moved
+    ($f = W_i$); where it did not, only the side of $W_{i-1}$ they lie on is known,
+    which decides the step when $u$ is beyond $W_{i-1}$ on the same side. The
+    orientation (a gain $k < 0$ after $(kF, G/k)$ flips it) is that of the first
+    move of the ascending path.
+
+    **Arguments:**
+
+    - `cycle_values`: the $W_i$ in staircase order (NBBI's `cycle_values`).
+    - `cycle_stderr`: their standard errors; two values within `z` standard errors
+      of a difference are equal (no move). Without it, equal to 1e-9 relative.
+    - `max_periods`: periods after the first tried before giving up.
+
+    **Returns:** `(values, ok)`: $u$ on the segments of one steady-state period in
+    staircase order, and whether it could be rebuilt (`ok`; `values` are the
+    $W_i$ where not).
+    """
+    w = jnp.asarray(cycle_values, dtype=float)
+    m = w.shape[0]
+    n = m // 2 + 1
+    tol = 1e-9 * jnp.max(jnp.abs(w))
+    if cycle_stderr is not None:
+        tol = tol + z * math.sqrt(2.0) * jnp.max(jnp.asarray(cycle_stderr, float))
+    rising = (jnp.arange(m) > 0) & (jnp.arange(m) < n)
+    same = rising == jnp.roll(rising, 1)
+    w_prev = jnp.roll(w, 1)  # W_{j-1}, cyclically
+    moved = jnp.abs(w - w_prev) > tol
+
+    # Period 1: the border of step j's direction is known at V_j (= W_j) iff the
+    # step moved (W_j != W_{j-1}) or followed that border from V_{j-1}; step 0
+    # (v_M to v_m in (3)) put point 1 on f_d(v_m).
+    def _known(prev, xs):
+        mv, sm = xs
+        k = mv | (prev & sm)
+        return k, k
+
+    _, known = jax.lax.scan(_known, jnp.asarray(True), (moved[1:], same[1:]))
+    known = jnp.concatenate([jnp.ones(1, bool), known])
+    # Orientation: sign of the first move of the ascending path (+1 if none).
+    up = moved & rising
+    sign = jnp.where(jnp.any(up), jnp.sign((w - w_prev)[jnp.argmax(up)]), 1.0)
+    d = jnp.where(rising, sign, -sign)  # d*(f - u) >= 0: the border is reached
+
+    def _step(carry, xs):
+        x, on, matched, fail = carry
+        w_j, w_jm1, known_j, same_j, d_j, prev_u, prev_on = xs
+        follow = on & same_j
+        onto = d_j * (w_j - x) >= -tol
+        # Border unknown at V_j: period 1 stayed at W_{j-1} off it, so
+        # d*f(V_j) < d*W_{j-1}; u stays if d*u >= d*W_{j-1}, else it is unknown.
+        stays = d_j * (x - w_jm1) >= -tol
+        take = known_j & (follow | onto)
+        unknown = ~known_j & (follow | ~stays)
+        u = jnp.where(matched, prev_u, jnp.where(take, w_j, x))
+        on = jnp.where(matched, prev_on, take)
+        fail = fail | (~matched & unknown)
+        matched = matched | ((jnp.abs(u - prev_u) <= tol) & (on == prev_on))
+        return (u, on, matched, fail), (u, on)
+
+    def _period(carry, _):
+        prev_u, prev_on, ok, broken, steady = carry
+        init = (prev_u[m - 1], prev_on[m - 1], jnp.asarray(False), jnp.asarray(False))
+        xs = (w, w_prev, known, same, d, prev_u, prev_on)
+        (_, _, matched, fail), (us, ons) = jax.lax.scan(_step, init, xs)
+        broken = broken | fail  # a step undecided: later periods are unknown too
+        newly = matched & ~broken & ~ok
+        steady = jnp.where(newly, us, steady)
+        return (us, ons, ok | newly, broken, steady), None
+
+    init = (w, known, jnp.asarray(False), jnp.asarray(False), w)
+    (_, _, ok, _, steady), _ = jax.lax.scan(_period, init, None, length=max_periods)
+    return steady, ok
+
+
 class FGIResult(eqx.Module):
     r"""$\hat G_M(jk\omega)$ at the candidate harmonics $k = 1..K$ of one $\omega$.
 
@@ -35,8 +132,11 @@ class FGIResult(eqx.Module):
     - `g`: $\hat G_M(jk\omega)$ (NaN where not kept).
     - `keep`: harmonics kept by Remark 2b's Parseval rule and not negligible.
     - `order`: Parseval's $p$ (Remark 2b).
+    - `cycle_values`: $u$ over one steady-state period (`steady_cycle_values` of
+      the NBBI points given).
     - `a`, `b`: Eq. (13) of the reconstructed $u$; `alpha`, `beta`: Eq. (22).
-    - `result`: `RESULTS.successful`, `not_exciting` (no harmonic kept) or
+    - `result`: `RESULTS.successful`, `not_exciting` (no harmonic kept),
+      `cycle_not_rebuilt` (`steady_cycle_values` cannot rebuild $u$) or
       `nonfinite`.
     """
 
@@ -45,6 +145,7 @@ class FGIResult(eqx.Module):
     g: Complex[Array, " k"]
     keep: Bool[Array, " k"]
     order: Int[Array, ""]
+    cycle_values: Float[Array, " m"]
     a: Float[Array, " k"]
     b: Float[Array, " k"]
     alpha: Float[Array, " k"]
@@ -106,7 +207,8 @@ def identify_fgi(
       `start`, which must be a period boundary of the input (24) (i.e. after the
       initialisation and the discarded transient periods).
     - `cycle_values`: $U_1..U_{2n-2}$ of (9) in staircase order (NBBI's
-      `cycle_values`), so $u = U_i$ on $[(i-1)\tau, i\tau)$ (11).
+      `cycle_values`), so $u = U_i$ on $[(i-1)\tau, i\tau)$ (11) in the first
+      period; the steady-state $u$ is rebuilt from them (`steady_cycle_values`).
     - `period_samples`: $T/dt$, a multiple of $2n-2$ (see `fgi_period_samples`).
     - `periods`: $M$ of (20).
     - `dt`: sampling period (s).
@@ -114,7 +216,9 @@ def identify_fgi(
       sum (27) reaches $(1-\varepsilon)$ of the power of $u$.
     - `max_harmonic`: the largest $k$ considered (also capped below $P/2$).
     - `cycle_stderr`: standard errors of the $U_i$ (NBBI's `stderr`); a harmonic
-      whose $|a_k - j b_k|$ is within `z` standard errors of 0 is negligible.
+      whose $|a_k - j b_k|$ is within `z` standard errors of 0 is negligible, and
+      two $U_i$ within `z` standard errors of a difference are equal when $u$ is
+      rebuilt.
     - `rtol`: a harmonic whose power is below `rtol` times that of $u$ is
       negligible (round-off: e.g. even harmonics of a half-wave antisymmetric
       cycle). Negligible harmonics are dropped, never divided by.
@@ -181,6 +285,7 @@ def _fgi(
 ) -> FGIResult:
     """The numerics of `identify_fgi` (validated arguments), compiled once per design."""
     m = values.shape[0]
+    values, rebuilt = steady_cycle_values(values, cycle_stderr=cycle_stderr, z=z)
     period = period_samples * dt
     omega = 2 * math.pi / period
     k = jnp.arange(1, n_harm + 1)
@@ -223,7 +328,11 @@ def _fgi(
     finite = jnp.all(jnp.where(keep, jnp.isfinite(jnp.abs(g)), True))
     result = RESULTS.where(
         finite,
-        RESULTS.where(jnp.any(keep), RESULTS.successful, RESULTS.not_exciting),
+        RESULTS.where(
+            rebuilt,
+            RESULTS.where(jnp.any(keep), RESULTS.successful, RESULTS.not_exciting),
+            RESULTS.cycle_not_rebuilt,
+        ),
         RESULTS.nonfinite,
     )
     if throw:
@@ -234,6 +343,7 @@ def _fgi(
         g=g,
         keep=keep,
         order=jnp.asarray(order),
+        cycle_values=values,
         a=a,
         b=b,
         alpha=alpha,

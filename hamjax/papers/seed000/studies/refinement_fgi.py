@@ -239,9 +239,13 @@ def _per_harmonic(p, estimates, truth, crlb_var, ok):
     m, rows = p.n_cycle, []
     for j, (_, w, k) in enumerate(p.harmonic_list):
         re, im = m + 2 * j, m + 2 * j + 1
-        e = estimates[ok][:, [re, im]] - truth[None, [re, im]]
-        mse = float(np.mean(np.sum(e**2, axis=1))) if e.shape[0] else float("nan")
+        e2 = np.sum((estimates[ok][:, [re, im]] - truth[None, [re, im]]) ** 2, axis=1)
+        R = e2.shape[0]
+        mse = float(np.mean(e2)) if R else float("nan")
+        # Delta method, as efficiency_summary: se(eff)/eff = se(MSE)/MSE.
+        mse_se = float(np.std(e2, ddof=1) / math.sqrt(R)) if R > 1 else float("nan")
         bound = float(crlb_var[re] + crlb_var[im])
+        eff = bound / mse if mse > 0 else float("nan")
         rows.append(
             {
                 "omega": k * w,
@@ -250,15 +254,22 @@ def _per_harmonic(p, estimates, truth, crlb_var, ok):
                 "abs_g": float(np.abs(truth[re] + 1j * truth[im])),
                 "rmse": math.sqrt(mse),
                 "crlb_std": math.sqrt(bound),
-                "efficiency": bound / mse if mse > 0 else float("nan"),
+                "efficiency": eff,
+                "efficiency_se": eff * mse_se / mse if mse > 0 else float("nan"),
             }
         )
     return rows
 
 
-def _min(x) -> float:
-    x = np.asarray(x, dtype=float)
-    return float(np.min(x[np.isfinite(x)])) if np.isfinite(x).any() else float("nan")
+def _efficiency_text(summary: dict, part: slice) -> str:
+    """`min (se) median` of the efficiencies of `part` of the parameters; the
+    minimum of p noisy estimates lies about 1.8 se below their mean at p = 16."""
+    eff = np.asarray(summary["efficiency"], dtype=float)[part]
+    se = np.asarray(summary["efficiency_se"], dtype=float)[part]
+    if not np.isfinite(eff).any():
+        return "nan"
+    i = int(np.nanargmin(eff))
+    return f"min {eff[i]:.2f} (se {se[i]:.2f}) median {np.nanmedian(eff):.2f}"
 
 
 def run(key, *, realisations: int, chunk: int, out: Path, quiet: bool, args) -> dict:
@@ -389,15 +400,18 @@ def run(key, *, realisations: int, chunk: int, out: Path, quiet: bool, args) -> 
         "joint output-error fit from the settled start. With only odd harmonics "
         "kept (a half-wave antisymmetric cycle), the refined G equals the settled "
         "closed form's: the FGI record adds information on the U_i only through "
-        "its mean, which the odd c_k do not see.",
+        "its mean, which the odd c_k do not see. efficiency_se: Monte Carlo "
+        "standard error of each efficiency (delta method), about sqrt(2/R): the "
+        "minimum over the entries lies about 1.8 se below 1 for an efficient "
+        "estimator.",
         "cost_ratio_refined_to_closed_form": t_ref / t_cf,
     }
     largest = [x for x in configs if x["periods"] == max(opts.periods)]
     summary["headline"] = (
         "; ".join(
-            f"SNR {x['snr_db']:.3g} dB, M = {x['periods']}: refined G efficiency min "
-            f"{_min(x['refined']['efficiency'][m:]):.2f} (U "
-            f"{_min(x['refined']['efficiency'][:m]):.2f}); fundamentals' worst "
+            f"SNR {x['snr_db']:.3g} dB, M = {x['periods']}: refined G efficiency "
+            f"{_efficiency_text(x['refined'], slice(m, None))} (U "
+            f"{_efficiency_text(x['refined'], slice(None, m))}); fundamentals' worst "
             f"relative error (median) refined/closed "
             f"{x['fundamental_ratio_refined_to_closed_form']:.3g}, refined/settled "
             f"{x['fundamental_ratio_refined_to_settled']:.3g}; failures "

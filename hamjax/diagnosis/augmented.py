@@ -345,17 +345,14 @@ def feedback_arguments(p: Float[Array, " S"], case: CaseArrays) -> tuple:
     $(v_w, v_{dw}) \\mapsto f$ and $c_w + c_{dw}$; all 0 at the neutral values."""
     at = named(p, case)
     eps_w, eps_dw = EPS_FRACTION * case.out_half, EPS_FRACTION * case.dw_half
-    c_w, c_dw = at("fric_w"), at("fric_dw")
 
     def phi(w):
-        return feedback_force(
-            w, case.out_half, case.u_scale, at("fb_cubic"), at("fb_gain"), at("fb_band")
-        )
+        return feedback_force(w, at, case.out_half, case.u_scale)
 
     def friction(v_w, v_dw):
-        return friction_force(v_w, v_dw, c_w, c_dw, eps_w, eps_dw)
+        return friction_force(v_w, v_dw, at, eps_w, eps_dw)
 
-    return phi, friction, c_w + c_dw
+    return phi, friction, at("fric_w") + at("fric_dw")
 
 
 def linear_part(
@@ -442,18 +439,7 @@ def static_part(
 
 def output_part(w: Array, p: Float[Array, " S"], case: CaseArrays) -> Array:
     """The output map $h$ (`output_nonlinearity`)."""
-    at = named(p, case)
-    return output_map(
-        w,
-        case.out_centre,
-        case.out_half,
-        at("out_q2"),
-        at("out_q3"),
-        at("out_lo"),
-        at("out_hi"),
-        at("out_db"),
-        at("out_abs"),
-    )
+    return output_map(w, named(p, case), case.out_centre, case.out_half)
 
 
 def simulate_augmented(

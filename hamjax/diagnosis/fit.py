@@ -106,18 +106,13 @@ def normal_equations(
     Jacobian row, so a diverging trial step is rejected. `memory`, `table`,
     `feedback`: as in `augmented.simulate_with_filter`.
     """
-    return _normal_equations(theta, row, case, memory, table, feedback)[0]
+    return _normal_equations(theta, row, case, (memory, table, feedback))[0]
 
 
-def _normal_equations(
-    theta: Float[Array, " P"],
-    row: Row,
-    case: CaseArrays,
-    memory: bool | Bool[Array, ""] = True,
-    table: bool | Bool[Array, ""] = True,
-    feedback: bool | Bool[Array, ""] = True,
-):
-    """`normal_equations`, and the physical parameters and filter at `theta`."""
+def _normal_equations(theta, row, case, flags):
+    """`normal_equations`, and the physical parameters and filter at `theta`;
+    `flags = (memory, table, feedback)`."""
+    memory, table, feedback = flags
     P, L = theta.shape[0], case.v_est.shape[0]
     pad = -L % BLOCK
     vd = jnp.pad(delay(case.v_est, row.tau), (0, pad), mode="edge")
@@ -191,7 +186,7 @@ def levenberg_marquardt(theta0, lam0, args, max_steps):
     def body(state):
         theta, trial, sse, H, g, coef, cost, lam, k, _ = state
         (sse_n, H_n, g_n), coef_n = _normal_equations(
-            trial, row, case, memory, table, feedback
+            trial, row, case, (memory, table, feedback)
         )
         prior = case.prior_weight
         cost_n = sse_n + prior * jnp.sum(jnp.where(mask, trial, 0.0) ** 2)

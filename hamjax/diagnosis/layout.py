@@ -44,7 +44,7 @@ from .effects import (
 )
 from .effects._base import FLIP_SIGN, output_half_range, scale_span
 from .effects.time_delay import MAX_DELAY
-from .residuals import noise_floor_hf
+from .residuals import noise_std_differences
 
 
 DETERMINISTIC = (
@@ -82,9 +82,12 @@ def prior_weight(uncertainty: float | None, noise_std: float) -> float:
     std $\sigma$ in the fit's scaled units, the negative log posterior times
     $\sigma^2$ is $\sum_k r_k^2 + (\sigma\rho/u)^2 \sum_j \theta_j^2$, so the
     weight is $(\sigma\rho/u)^2$ (never below `PRIOR_FLOOR`; `uncertainty=None`:
-    the floor alone). $\sigma$ is read off the nominal residual's upper half band
-    (`residuals.noise_floor_hf`, which over-estimates rather than under-estimates,
-    so the prior errs on the firm side)."""
+    the floor alone). $\sigma$ is the median absolute second difference of the
+    nominal's estimation residual (`residuals.noise_std_differences`): the upper
+    band of that residual (`noise_floor_hf`) over-estimates it wherever the gap
+    itself is broadband (a clip, a sign-blind sensor), which made the prior hold a
+    re-fit far firmer than stated; the median is blind to a gap's few kinks and
+    errs, under coloured noise, on the weak side (towards the plain fit)."""
     if uncertainty is None:
         return PRIOR_FLOOR
     if not (np.isfinite(uncertainty) and uncertainty > 0):
@@ -344,7 +347,7 @@ def prepare(
     v_val, m_val = _pad_record(val["v"], L)
     y_val, _ = _pad_record(val["y"], L)
     y_scale = max(float(np.std(est["y"])), 1e-12)
-    noise_std = noise_floor_hf(np.asarray(est["y"]) - w_est)
+    noise_std = noise_std_differences(np.asarray(est["y"]) - w_est)
     # NumPy on the host: the fits stack and gather these without eager JAX ops
     f = lambda x: np.asarray(x, dtype=float)
     arrays = CaseArrays(

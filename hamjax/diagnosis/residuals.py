@@ -30,6 +30,20 @@ def noise_floor_hf(r: np.ndarray) -> float:
     return float(np.sqrt(np.mean(P[upper])))
 
 
+def noise_std_differences(r: np.ndarray) -> float:
+    r"""A robust estimate of the std of white noise in `r`: the median absolute
+    second difference, $\sigma \approx \mathrm{med}|\Delta^2 r| / (0.6745\sqrt 6)$
+    ($\Delta^2 e$ of white Gaussian noise is $N(0, 6\sigma^2)$). A model error that
+    is smooth in time has small second differences, and one with kinks or jumps
+    (a clip, $|w|$, a stick-slip) has large ones at a few samples only, which the
+    median ignores; coloured noise is under-estimated (its second differences
+    are smaller than a white noise's of the same std)."""
+    d = np.diff(np.asarray(r, float), n=2)
+    if d.size == 0:
+        return 0.0
+    return float(np.median(np.abs(d)) / (0.6744897501960817 * math.sqrt(6.0)))
+
+
 def improvement_z(
     r_before: np.ndarray, r_after: np.ndarray, n_blocks: int = 20
 ) -> float:

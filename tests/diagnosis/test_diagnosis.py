@@ -30,7 +30,10 @@ from hamjax.diagnosis.effects.backlash import play_step
 from hamjax.diagnosis.effects.coloured_noise import ar1_errors, fit_ar1
 from hamjax.diagnosis.effects.dead_zone import dead_zone
 from hamjax.diagnosis.effects.drift import local_level_errors
-from hamjax.diagnosis.effects.output_nonlinearity import output_map
+from hamjax.diagnosis.effects.output_nonlinearity import (
+    OutputNonlinearityEffect,
+    output_map,
+)
 from hamjax.diagnosis.effects.preload import add_preload
 from hamjax.diagnosis.effects.rate_limit import rate_limit_step
 from hamjax.diagnosis.effects.saturation import saturate
@@ -58,7 +61,8 @@ def test_effects_neutral_exactly(getkey):
     assert jnp.array_equal(saturate(v, -inf, inf), v)
     assert jnp.array_equal(add_preload(v, v, 0.0), v)
     assert jnp.array_equal(delay(v, jnp.asarray(0)), v)
-    assert jnp.array_equal(output_map(v, 0.3, 2.0, 0.0, 0.0, -inf, inf, 0.0, 0.0), v)
+    neutral = OutputNonlinearityEffect.neutral  # the effect's own neutral values
+    assert jnp.array_equal(output_map(v, neutral.__getitem__, 0.3, 2.0), v)
     assert jnp.array_equal(ar1_errors(v, 0.0), v)
     assert jnp.array_equal(local_level_errors(v, 0.0), v)
 

@@ -50,3 +50,27 @@ def test_a_pi_loop_is_seen_closed():
 def test_short_or_constant_inputs_are_not_tested():
     assert not feedback_test(np.ones(50), np.arange(50.0))["applicable"]
     assert not feedback_test(np.ones(500), np.ones(500))["applicable"]
+
+
+def test_difference_noise_estimate_ignores_kinks_and_smooth_gaps():
+    # white noise of std 1e-3 under gaps 10-500x larger: a slow sine, and the
+    # residuals of a sign-blind sensor and of a clip on a linear response to a
+    # staircase (kinks where w crosses 0 or the clip level). The median of
+    # |second differences| reads the noise (its sampling error at n = 4000 is
+    # about 2 %; the kinks' samples move it a little more: 25 % bounds it); the
+    # upper-band estimate reads the kinks as noise, 10x too high.
+    from hamjax.diagnosis.residuals import noise_floor_hf, noise_std_differences
+
+    rng = np.random.default_rng([13, 0])
+    n = 4000
+    v = np.repeat(rng.uniform(-1, 1, n // 40), 40)
+    w = signal.lfilter([0.0, 0.3], [1.0, -0.7], v)
+    e = 1e-3 * rng.standard_normal(n)
+    gaps = (
+        0.5 * np.sin(np.arange(n) / 300.0),
+        np.abs(w) - w,
+        np.clip(w, -0.5, 0.5) - w,
+    )
+    for gap in gaps:
+        assert abs(noise_std_differences(e + gap) / 1e-3 - 1) < 0.25
+    assert noise_floor_hf(e + gaps[1]) > 10e-3

@@ -19,9 +19,19 @@ from hamjax.diagnosis.augmented import (
     uses_feedback,
 )
 from hamjax.diagnosis.diagnose import diagnose_many
-from hamjax.diagnosis.effects.feedback_nonlinearity import feedback_force
-from hamjax.diagnosis.effects.friction import EPS_FRACTION, friction_force
-from hamjax.diagnosis.effects.output_nonlinearity import output_map
+from hamjax.diagnosis.effects.feedback_nonlinearity import (
+    FeedbackNonlinearityEffect,
+    feedback_force,
+)
+from hamjax.diagnosis.effects.friction import (
+    EPS_FRACTION,
+    FrictionEffect,
+    friction_force,
+)
+from hamjax.diagnosis.effects.output_nonlinearity import (
+    OutputNonlinearityEffect,
+    output_map,
+)
 from hamjax.diagnosis.fit import normal_equations
 from hamjax.diagnosis.layout import N_MAX, prepare
 from hamjax.papers.gap.demo_cases import staircase
@@ -61,11 +71,14 @@ def test_new_shapes_are_exactly_neutral(getkey):
     # adds 0 * (|w| - w); exact equality, not a tolerance
     w = jr.normal(getkey(), (200,))
     w_prev = jr.normal(getkey(), (200,))
-    zero = jnp.zeros(())
-    assert jnp.array_equal(friction_force(w, w_prev, zero, zero, 0.1, 0.2), 0 * w)
-    assert jnp.array_equal(feedback_force(w, 1.5, 0.7, zero, zero, zero), 0 * w)
-    inf = jnp.inf
-    assert jnp.array_equal(output_map(w, 0.0, 2.0, 0, 0, -inf, inf, 0, 0.0), w)
+    # each effect's own neutral values, read by name as the augmented model does
+    fric, fb, out = (
+        e.neutral.__getitem__
+        for e in (FrictionEffect, FeedbackNonlinearityEffect, OutputNonlinearityEffect)
+    )
+    assert jnp.array_equal(friction_force(w, w_prev, fric, 0.1, 0.2), 0 * w)
+    assert jnp.array_equal(feedback_force(w, fb, 1.5, 0.7), 0 * w)
+    assert jnp.array_equal(output_map(w, out, 0.0, 2.0), w)
 
 
 @pytest.mark.parametrize("plant", PLANTS)

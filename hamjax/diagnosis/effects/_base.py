@@ -1,9 +1,16 @@
 """The shape shared by every candidate effect of the sim-to-real-gap catalogue."""
 
+from collections.abc import Callable
 from typing import ClassVar
 
 import equinox as eqx
 import numpy as np
+from jaxtyping import Array, Float
+
+
+# The physical value of a slot by name (`augmented.named`; a dict's `__getitem__`
+# does too): what an effect's formula reads its parameters from.
+SlotValues = Callable[[str], Float[Array, ""]]
 
 
 class StartContext(eqx.Module):

@@ -16,20 +16,21 @@ Neutral: $k_3 = k = b = 0$ ($\phi \equiv 0$).
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from ._base import AbstractEffect, StartContext, output_half_range
+from ._base import AbstractEffect, SlotValues, StartContext, output_half_range
 
 
 def feedback_force(
     w: Float[Array, ""],
+    at: SlotValues,
     half: Float[Array, ""],
     u_scale: Float[Array, ""],
-    k3: Float[Array, ""],
-    gain: Float[Array, ""],
-    band: Float[Array, ""],
 ) -> Float[Array, ""]:
-    r"""$\phi(w) = k_3 (w/H)^3 U + k\,(w - \mathrm{clip}(w, -b, b))$; exactly 0 at the
-    neutral values."""
-    return k3 * (w / half) ** 3 * u_scale + gain * (w - jnp.clip(w, -band, band))
+    r"""$\phi(w) = k_3 (w/H)^3 U + k\,(w - \mathrm{clip}(w, -b, b))$, slots `fb_cubic`
+    ($k_3$), `fb_gain` ($k$), `fb_band` ($b$); exactly 0 at the neutral values."""
+    band = at("fb_band")
+    return at("fb_cubic") * (w / half) ** 3 * u_scale + at("fb_gain") * (
+        w - jnp.clip(w, -band, band)
+    )
 
 
 class FeedbackNonlinearityEffect(AbstractEffect):

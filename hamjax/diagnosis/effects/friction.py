@@ -30,7 +30,7 @@ steps, `tests/diagnosis/test_diagnosis_fit.py`).
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from ._base import AbstractEffect, StartContext
+from ._base import AbstractEffect, SlotValues, StartContext
 
 
 EPS_FRACTION = 1e-3  # epsilon / velocity scale (module docstring)
@@ -39,15 +39,16 @@ EPS_FRACTION = 1e-3  # epsilon / velocity scale (module docstring)
 def friction_force(
     v_w: Float[Array, ""],
     v_dw: Float[Array, ""],
-    c_w: Float[Array, ""],
-    c_dw: Float[Array, ""],
+    at: SlotValues,
     eps_w: Float[Array, ""],
     eps_dw: Float[Array, ""],
 ) -> Float[Array, ""]:
     r"""$f = c_w \tanh(v_w/\varepsilon_w) + c_{dw}\tanh(v_{dw}/\varepsilon_{dw})$ with
-    $v_w$ the output and $v_{dw}$ its rate over the step: exactly 0 at the neutral
-    $c_w = c_{dw} = 0$."""
-    return c_w * jnp.tanh(v_w / eps_w) + c_dw * jnp.tanh(v_dw / eps_dw)
+    $v_w$ the output and $v_{dw}$ its rate over the step, $c_w$, $c_{dw}$ the slots
+    `fric_w`, `fric_dw`: exactly 0 at the neutral $c_w = c_{dw} = 0$."""
+    return at("fric_w") * jnp.tanh(v_w / eps_w) + at("fric_dw") * jnp.tanh(
+        v_dw / eps_dw
+    )
 
 
 class FrictionEffect(AbstractEffect):

@@ -4,31 +4,34 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from ._base import FLIP_SIGN, AbstractEffect, StartContext, output_half_range
+from ._base import (
+    FLIP_SIGN,
+    AbstractEffect,
+    SlotValues,
+    StartContext,
+    output_half_range,
+)
 
 
 def output_map(
     w: Float[Array, "*shape"],
+    at: SlotValues,
     centre: Float[Array, ""],
     half: Float[Array, ""],
-    q2: Float[Array, ""],
-    q3: Float[Array, ""],
-    lower: Float[Array, ""],
-    upper: Float[Array, ""],
-    band: Float[Array, ""],
-    sign_blind: Float[Array, ""],
 ) -> Float[Array, "*shape"]:
     """$h(w)$: a partly sign-blind reading $w + a(|w| - w)$ ($a = 1$: $|w|$), then a
     sensor dead band $b$ around 0, a quadratic/cubic bend
-    $w + H(q_2\\tilde w^2 + q_3\\tilde w^3)$ with $\\tilde w = (w - m)/H$, then clipping.
+    $w + H(q_2\\tilde w^2 + q_3\\tilde w^3)$ with $\\tilde w = (w - m)/H$, then clipping
+    to $[lo, hi]$; slots `out_abs` ($a$), `out_db` ($b$), `out_q2`, `out_q3`,
+    `out_lo`, `out_hi`.
 
-    Neutral at $a = 0$, $b = 0$, $q_2 = q_3 = 0$, $[lower, upper] = [-\\infty, \\infty]$.
+    Neutral at $a = 0$, $b = 0$, $q_2 = q_3 = 0$, $[lo, hi] = [-\\infty, \\infty]$.
     """
-    o = w + sign_blind * (jnp.abs(w) - w)
-    o = o - jnp.clip(o, -band, band)
+    o = w + at("out_abs") * (jnp.abs(w) - w)
+    o = o - jnp.clip(o, -at("out_db"), at("out_db"))
     s = (o - centre) / half
-    o = o + half * (q2 * s**2 + q3 * s**3)
-    return jnp.clip(o, lower, upper)
+    o = o + half * (at("out_q2") * s**2 + at("out_q3") * s**3)
+    return jnp.clip(o, at("out_lo"), at("out_hi"))
 
 
 class OutputNonlinearityEffect(AbstractEffect):

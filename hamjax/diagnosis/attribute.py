@@ -117,6 +117,7 @@ SHRINK_EXPLAINED = 0.5
 DETERMINISTIC_NAMES = tuple(e.name for e in DETERMINISTIC)
 NOISE_NAMES = ("drift", "coloured_noise")
 EFFECT_SLOT_NAMES = {e.name: tuple(e.slots) for e in DETERMINISTIC if e.slots}
+FRICTION = next(e for e in DETERMINISTIC if e.name == "friction")
 
 
 @dataclass
@@ -165,6 +166,10 @@ def _params(prep: Prepared, fit: dict, row: int, effect: str) -> dict:
         i = names.index(name)
         if free[i]:
             out[name] = {"value": float(phys[i]), "std": float(std_full[i])}
+    if effect == "friction":
+        used = {n for n in EFFECT_SLOT_NAMES[effect] if free[names.index(n)]}
+        # which velocity the friction acts on: "output" (s = w) or "derivative"
+        out["velocity"] = {"value": FRICTION.velocity(used), "std": 0.0}
     if effect == "time_delay":
         tau = int(prep.rows[row][1].tau)
         out["tau_samples"] = {"value": tau, "std": 0.0}

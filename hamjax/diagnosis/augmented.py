@@ -2,7 +2,20 @@
 effect in place, each at a parameter slot whose neutral value removes it.
 
 $v \\to$ delay $\\to$ rate limit $\\to$ backlash $\\to$ dead zone $\\to F \\to$ preload
-$\\to$ saturation $\\to$ extra pole $\\to G \\to h$ (output map).
+$\\to$ saturation $\\to$ extra pole $\\to G \\to h$ (output map), and a feedback
+path from the output of $G$ to its input: $u' = u - f(\\text{velocity}) - \\phi(w)$
+(`friction`, `feedback_nonlinearity`).
+
+**The feedback loop** runs the filter and the fed-back forces in one scan
+(`feedback_scan`): at step $k$ the filter's output before consuming $u_k$ is
+$\\hat w_k = z_0 + b_0 s_k$ ($s_k$ the input side's output), at which the feedback
+nonlinearity $\\phi$ is evaluated; the friction acts on the velocity over the
+step, solved implicitly for $u_k$ (it sticks rather than chatters); then the
+filter consumes $u_k$. For $b_0 = 0$ (every zero-order-hold discretised strictly
+proper block) $\\hat w_k = w_k$ and the loop is exact; for $b_0 \\ne 0$ (an
+algebraic loop) this is the one-step convention that the forces see the output
+without its own feedthrough. Without a freed feedback slot the plain filter scan
+(`filter_scan`) runs instead; with every feedback slot neutral the loop gives the same numbers.
 
 One shape of model for every case and every candidate means one compilation: a
 candidate is a *row* (which slots it frees, where it starts, its delay), a case is
@@ -30,6 +43,11 @@ from .effects._base import UNIT_MAX, StartContext, unit_raw
 from .effects.backlash import BacklashEffect, play_step
 from .effects.dead_zone import DeadZoneEffect, dead_zone
 from .effects.extra_pole import ExtraPoleEffect
+from .effects.feedback_nonlinearity import (
+    FeedbackNonlinearityEffect,
+    feedback_force,
+)
+from .effects.friction import EPS_FRACTION, FrictionEffect, friction_force
 from .effects.output_nonlinearity import OutputNonlinearityEffect, output_map
 from .effects.preload import PreloadEffect, add_preload
 from .effects.rate_limit import RateLimitEffect, rate_limit_step
@@ -47,6 +65,8 @@ CHAIN = (
     PreloadEffect(),
     SaturationEffect(),
     ExtraPoleEffect(),
+    FrictionEffect(),
+    FeedbackNonlinearityEffect(),
     OutputNonlinearityEffect(),
 )
 EFFECT_SLOTS = tuple(slot for effect in CHAIN for slot in effect.slots)
@@ -103,6 +123,8 @@ class CaseArrays(eqx.Module):
     out_centre: Float[Array, ""]
     out_half: Float[Array, ""]
     y_scale: Float[Array, ""]
+    u_scale: Float[Array, ""]  # std of the nominal u = F(v) (estimation)
+    dw_half: Float[Array, ""]  # velocity scale of dw/dt (`StartContext.dw_half`)
     # weight of the Gaussian prior at nominal on the scaled re-fit parameters
     # (`layout.prior_weight`, the user's stated nominal uncertainty)
     prior_weight: Float[Array, ""]
@@ -248,17 +270,110 @@ def filter_scan(
     `scipy.signal.lfilter(b, a, u)`, and chaining the state over consecutive
     blocks of `u` gives the same output as one call on the whole record."""
 
-    def step(z, uk):
-        yk = b[0] * uk + z[0]
-        z = jnp.concatenate([z[1:], jnp.zeros(1, z.dtype)]) + b[1:] * uk - a[1:] * yk
-        return z, yk
-
-    return lax.scan(step, z, u, unroll=1)
+    return lax.scan(lambda z, uk: _df2t_step(b, a, z, uk), z, u, unroll=1)
 
 
-def filter_df2t(b: Array, a: Array, u: Array) -> Array:
-    """`scipy.signal.lfilter(b, a, u)` from rest (direct form II transposed)."""
-    return filter_scan(b, a, u, jnp.zeros(a.shape[0] - 1, u.dtype))[1]
+def _df2t_step(b: Array, a: Array, z: Array, uk: Array) -> tuple[Array, Array]:
+    """One step of direct form II transposed: `(z_next, y_k)`."""
+    yk = b[0] * uk + z[0]
+    z = jnp.concatenate([z[1:], jnp.zeros(1, z.dtype)]) + b[1:] * uk - a[1:] * yk
+    return z, yk
+
+
+def feedback_scan(
+    b: Array,
+    a: Array,
+    s: Float[Array, " B"],
+    state: tuple[Array, Array],
+    phi: Callable[[Array], Array],
+    friction: Callable[[Array, Array], Array],
+    bound: Float[Array, ""],
+    dt: Float[Array, ""],
+) -> tuple[tuple[Array, Array], Float[Array, " B"]]:
+    """The filter with the fed-back forces subtracted from its input, from
+    `state = (filter state, previous output)`: `(state_end, w)` (chains over
+    blocks like `filter_scan`).
+
+    At step $k$: $\\hat w_k = z_0 + b_0 s_k$ and $s'_k = s_k - \\phi(\\hat w_k)$
+    (explicit); the friction acts on the velocity over the step, $w_{k+1}$ and
+    $(w_{k+1} - w_k)/dt$, both affine in $u_k$ (direct form II transposed:
+    $w_{k+1} = z_1 - a_1 z_0 + (b_1 - a_1 b_0) u_k$ up to $b_0 u_{k+1}$), so $u_k$
+    solves $u = s'_k - $ `friction(v_w(u), v_dw(u))` (implicit, the discrete
+    form of Coulomb friction that sticks instead of chattering). The root lies in
+    $s'_k \\pm$ `bound` ($|f| \\le c_w + c_{dw}$): 40 bisections (no tangents),
+    then one Newton step, which carries the tangents of the implicit function.
+    """
+
+    def step(carry, sk):
+        z, _ = carry
+        w_hat = b[0] * sk + z[0]
+        s2 = sk - phi(w_hat)
+        a_w, b_w = z[1] - a[1] * z[0], b[1] - a[1] * b[0]
+        a_d, b_d = (a_w - z[0]) / dt, (b_w - b[0]) / dt
+
+        def g(u):
+            return u - s2 + friction(a_w + b_w * u, a_d + b_d * u)
+
+        def bisect(_, lohi):
+            lo, hi = lohi
+            mid = 0.5 * (lo + hi)
+            up = lax.stop_gradient(g(mid)) > 0
+            return jnp.where(up, lo, mid), jnp.where(up, mid, hi)
+
+        c = lax.stop_gradient(bound)
+        lo, hi = lax.stop_gradient(s2) - c, lax.stop_gradient(s2) + c
+        lo, hi = lax.fori_loop(0, 40, bisect, (lo, hi))
+        root = lax.stop_gradient(0.5 * (lo + hi))
+        g0, slope = jax.jvp(g, (root,), (jnp.ones_like(root),))
+        uk = root - g0 / slope
+        z, yk = _df2t_step(b, a, z, uk)
+        return (z, yk), yk
+
+    return lax.scan(step, state, s, unroll=1)
+
+
+def feedback_arguments(p: Float[Array, " S"], case: CaseArrays) -> tuple:
+    """`(phi, friction, bound)` of `feedback_scan` at parameters `p`: the
+    feedback nonlinearity $w \\mapsto \\phi(w)$, the friction
+    $(v_w, v_{dw}) \\mapsto f$ and $c_w + c_{dw}$; all 0 at the neutral values."""
+    at = named(p, case)
+    eps_w, eps_dw = EPS_FRACTION * case.out_half, EPS_FRACTION * case.dw_half
+    c_w, c_dw = at("fric_w"), at("fric_dw")
+
+    def phi(w):
+        return feedback_force(
+            w, case.out_half, case.u_scale, at("fb_cubic"), at("fb_gain"), at("fb_band")
+        )
+
+    def friction(v_w, v_dw):
+        return friction_force(v_w, v_dw, c_w, c_dw, eps_w, eps_dw)
+
+    return phi, friction, c_w + c_dw
+
+
+def linear_part(
+    b: Array,
+    a: Array,
+    u: Float[Array, " B"],
+    state: tuple[Array, Array],
+    p: Float[Array, " S"],
+    case: CaseArrays,
+    feedback: bool | Bool[Array, ""] = True,
+) -> tuple[tuple[Array, Array], Float[Array, " B"]]:
+    """The linear block from `state = (filter state, previous output)`, with the
+    feedback loop (`feedback_scan`) or, for `feedback=False`, without it
+    (`filter_scan`, exact when every feedback slot is neutral; the previous
+    output is then carried unchanged)."""
+
+    def loop(u, state):
+        return feedback_scan(b, a, u, state, *feedback_arguments(p, case), case.dt)
+
+    def plain(u, state):
+        z, w_prev = state
+        z, w = filter_scan(b, a, u, z)
+        return (z, w_prev), w
+
+    return switch(feedback, loop, plain, u, state)
 
 
 def memory_scan(
@@ -333,6 +448,7 @@ def output_part(w: Array, p: Float[Array, " S"], case: CaseArrays) -> Array:
         at("out_lo"),
         at("out_hi"),
         at("out_db"),
+        at("out_abs"),
     )
 
 
@@ -342,15 +458,18 @@ def simulate_augmented(
     v: Float[Array, " L"],
     case: CaseArrays,
     memory: bool | Bool[Array, ""] = True,
+    feedback: bool | Bool[Array, ""] = True,
 ) -> Float[Array, " L"]:
     """Output of the augmented model at physical parameters `p`, from rest.
 
     `memory=False` skips the input-memory scan (rate limit and backlash), which is
     exact when both are at their neutral values; a traced `memory` that is the same
     for a whole batch (not mapped over) skips it at run time for that batch.
+    `feedback=False` likewise runs the plain filter instead of the feedback loop
+    (exact when `friction` and `feedback_nonlinearity` are neutral).
     """
     b, a = filter_coefficients(p, case)
-    return simulate_with_filter(p, b, a, tau, v, case, memory)
+    return simulate_with_filter(p, b, a, tau, v, case, memory, feedback=feedback)
 
 
 def simulate_with_filter(
@@ -362,12 +481,14 @@ def simulate_with_filter(
     case: CaseArrays,
     memory: bool | Bool[Array, ""] = True,
     table: bool | Bool[Array, ""] = True,
+    feedback: bool | Bool[Array, ""] = True,
 ) -> Float[Array, " L"]:
     """`simulate_augmented` with the filter `(b, a) = filter_coefficients(p, case)`
     already at hand (a fit has it; the matrix exponential is not repeated)."""
     v = delay(v, tau)
     x = switch(memory, input_memory, lambda v, *_: v, v, *memory_arguments(p, case))
-    w = filter_df2t(b, a, static_part(x, p, case, table))
+    rest = (jnp.zeros(a.shape[0] - 1, v.dtype), jnp.zeros((), v.dtype))
+    _, w = linear_part(b, a, static_part(x, p, case, table), rest, p, case, feedback)
     return output_part(w, p, case)
 
 
@@ -377,10 +498,11 @@ def simulate_row(
     v: Float[Array, " L"],
     case: CaseArrays,
     memory: bool | Bool[Array, ""] = True,
+    feedback: bool | Bool[Array, ""] = True,
 ) -> Float[Array, " L"]:
     """`simulate_augmented` at a row's compact parameters."""
     p = full_parameters(theta, row, case)
-    return simulate_augmented(p, row.tau, v, case, memory)
+    return simulate_augmented(p, row.tau, v, case, memory, feedback)
 
 
 def uses_memory(free: Bool[Array, "*batch S"]) -> Bool[Array, "*batch"]:
@@ -389,6 +511,16 @@ def uses_memory(free: Bool[Array, "*batch S"]) -> Bool[Array, "*batch"]:
     return (
         free[..., slot_index("rate", n_max)] | free[..., slot_index("backlash", n_max)]
     )
+
+
+FEEDBACK_SLOTS = FrictionEffect.slots + FeedbackNonlinearityEffect.slots
+
+
+def uses_feedback(free: Bool[Array, "*batch S"]) -> Bool[Array, "*batch"]:
+    """Whether rows with these free slots need the feedback loop (`feedback_scan`)."""
+    n_max = free.shape[-1] - len(NOMINAL_SLOTS) - len(EFFECT_SLOTS)
+    cols = [slot_index(name, n_max) for name in FEEDBACK_SLOTS]
+    return free[..., cols].any(axis=-1)
 
 
 simulate_rows = jax.vmap(simulate_row, in_axes=(0, 0, None, None))

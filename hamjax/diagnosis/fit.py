@@ -22,14 +22,15 @@ from .augmented import (
     CaseArrays,
     Row,
     filter_coefficients,
-    filter_scan,
     full_parameters,
+    linear_part,
     memory_arguments,
     memory_scan,
     output_part,
     simulate_with_filter,
     static_part,
     switch,
+    uses_feedback,
     uses_memory,
 )
 from .effects.time_delay import delay
@@ -65,15 +66,17 @@ def nominal_mask(row: Row, case: CaseArrays) -> Bool[Array, " P"]:
     )
 
 
-def _block_model(p, b, a, state, vb, case, memory, table):
+def _block_model(p, b, a, state, vb, case, memory, table, feedback):
     """One block of the estimation record through the augmented model, from the
-    scans' `state = (rate-limited input, play output, filter state)`."""
-    xr, xb, z = state
+    scans' `state = (rate-limited input, play output, filter state, previous
+    output)` (`augmented.linear_part`: the feedback loop or the plain filter)."""
+    xr, xb, z, w_prev = state
     skip = lambda v, s, *_: (s, v)  # noqa: E731
     args = (vb, (xr, xb), *memory_arguments(p, case))
     (xr, xb), x = switch(memory, memory_scan, skip, *args)
-    z, w = filter_scan(b, a, static_part(x, p, case, table), z)
-    return (xr, xb, z), output_part(w, p, case)
+    u = static_part(x, p, case, table)
+    (z, w_prev), w = linear_part(b, a, u, (z, w_prev), p, case, feedback)
+    return (xr, xb, z, w_prev), output_part(w, p, case)
 
 
 def _coefficients(theta, row, case):
@@ -87,6 +90,7 @@ def normal_equations(
     case: CaseArrays,
     memory: bool | Bool[Array, ""] = True,
     table: bool | Bool[Array, ""] = True,
+    feedback: bool | Bool[Array, ""] = True,
 ) -> tuple[Float[Array, ""], Float[Array, "P P"], Float[Array, " P"]]:
     """The record part of the least-squares problem at `theta`: `(r^T r, J^T J,
     J^T r)` of the scaled output residual `r = (y_model - y) m / y_scale` and its
@@ -99,9 +103,10 @@ def normal_equations(
     The Jacobian is forward mode, one tangent per entry of `theta`; the
     parameter-to-coefficient map (matrix exponential included) runs once per
     call, not per block. A non-finite residual sample counts as `1e3` with a zero
-    Jacobian row, so a diverging trial step is rejected.
+    Jacobian row, so a diverging trial step is rejected. `memory`, `table`,
+    `feedback`: as in `augmented.simulate_with_filter`.
     """
-    return _normal_equations(theta, row, case, memory, table)[0]
+    return _normal_equations(theta, row, case, memory, table, feedback)[0]
 
 
 def _normal_equations(
@@ -110,6 +115,7 @@ def _normal_equations(
     case: CaseArrays,
     memory: bool | Bool[Array, ""] = True,
     table: bool | Bool[Array, ""] = True,
+    feedback: bool | Bool[Array, ""] = True,
 ):
     """`normal_equations`, and the physical parameters and filter at `theta`."""
     P, L = theta.shape[0], case.v_est.shape[0]
@@ -123,13 +129,16 @@ def _normal_equations(
         lambda t: jax.jvp(lambda th: _coefficients(th, row, case), (theta,), (t,)),
         out_axes=(None, 0),
     )(basis)
-    state0 = (vd[0], vd[0], jnp.zeros(a.shape[0] - 1, theta.dtype))
+    zero = jnp.zeros((), theta.dtype)
+    state0 = (vd[0], vd[0], jnp.zeros(a.shape[0] - 1, theta.dtype), zero)
 
     def body(carry):
         k, state, dstate, sse, H, g = carry
         take = lambda x: lax.dynamic_slice_in_dim(x, k * BLOCK, BLOCK)  # noqa: E731
         vb, yb, mb = take(vd), take(y), take(m)
-        f = lambda p, b, a, s: _block_model(p, b, a, s, vb, case, memory, table)  # noqa: E731
+        f = lambda p, b, a, s: _block_model(  # noqa: E731
+            p, b, a, s, vb, case, memory, table, feedback
+        )
         (state, yhat), (dstate, dy) = jax.vmap(
             lambda *t: jax.jvp(f, (p, b, a, state), t), out_axes=(None, 0)
         )(dp, db, da, dstate)
@@ -173,7 +182,7 @@ def levenberg_marquardt(theta0, lam0, args, max_steps):
     from `lam0 = 3 lam`. Returns `(theta, sse, JtJ, converged, lam, steps)`, the
     last three of the record part only (scaled output).
     """
-    row, case, memory, table = args
+    row, case, memory, table, feedback = args
     P = theta0.shape[0]
     mask = nominal_mask(row, case)
 
@@ -182,7 +191,9 @@ def levenberg_marquardt(theta0, lam0, args, max_steps):
 
     def body(state):
         theta, trial, sse, H, g, coef, cost, lam, k, _ = state
-        (sse_n, H_n, g_n), coef_n = _normal_equations(trial, row, case, memory, table)
+        (sse_n, H_n, g_n), coef_n = _normal_equations(
+            trial, row, case, memory, table, feedback
+        )
         prior = case.prior_weight
         cost_n = sse_n + prior * jnp.sum(jnp.where(mask, trial, 0.0) ** 2)
         better = cost_n < cost
@@ -231,19 +242,21 @@ def fit_row(
     lam0: float | Array = LAMBDA0,
     memory: bool | Bool[Array, ""] = True,
     table: bool | Bool[Array, ""] = True,
+    feedback: bool | Bool[Array, ""] = True,
 ) -> RowFit:
     """Fit one row from `row.theta0` (the nominal slots start at nominal).
-    `memory`, `table`: as in `simulate_augmented` and `static_map` (False only if
-    the row frees neither the rate limit nor the backlash, and if the case's map
-    is not tabulated)."""
+    `memory`, `table`, `feedback`: as in `simulate_augmented` and `static_map`
+    (False only if the row frees neither the rate limit nor the backlash, if the
+    case's map is not tabulated, and if the row frees no feedback slot)."""
     theta, sse, jtj, (p, b, a), done, lam, k = levenberg_marquardt(
-        row.theta0, lam0, (row, case, memory, table), max_steps
+        row.theta0, lam0, (row, case, memory, table, feedback), max_steps
     )
     n = jnp.sum(case.m_est)
     used = row.idx < case.anchor.shape[0]
     dof = jnp.maximum(n - jnp.sum(used), 1.0)
-    y_val = simulate_with_filter(p, b, a, row.tau, case.v_val, case, memory, table)
-    y_est = simulate_with_filter(p, b, a, row.tau, case.v_est, case, memory, table)
+    flags = (memory, table, feedback)
+    y_val = simulate_with_filter(p, b, a, row.tau, case.v_val, case, *flags)
+    y_est = simulate_with_filter(p, b, a, row.tau, case.v_est, case, *flags)
     sse_est = sse * case.y_scale**2
     return RowFit(
         theta=theta,
@@ -286,7 +299,13 @@ def fit_rows(rows: Row, case: CaseArrays, max_steps=30) -> RowFit:
 
 
 def _fit_flat(
-    rows: Row, cases: CaseArrays, max_steps, lam0, memory=None, table=None
+    rows: Row,
+    cases: CaseArrays,
+    max_steps,
+    lam0,
+    memory=None,
+    table=None,
+    feedback=None,
 ) -> RowFit:
     # `memory`, `table`: True or False for a whole call (static: the other branch
     # is not even compiled, -20 % of the program), or None to decide per
@@ -294,22 +313,27 @@ def _fit_flat(
     # no row frees the rate limit or the backlash skips the input-memory scan
     # (measured -8 % per screening batch), one without a tabulated map skips the
     # table look-up (-28 %); `schedule` and `diagnose_many` order the rows so
-    # that most batches are alike.
+    # that most batches are alike. `feedback` likewise: a batch in which no row
+    # frees a `friction` or `feedback_nonlinearity` slot runs the plain filter.
     if memory is None:
         memory = jnp.any(uses_memory(rows.free))
     if table is None:
         table = jnp.any(cases.nl_kind == NL_TABULATED)
-    fit = lambda r, c, k, lam: fit_row(r, c, k, lam, memory, table)  # noqa: E731
+    if feedback is None:
+        feedback = jnp.any(uses_feedback(rows.free))
+    fit = lambda r, c, k, lam: fit_row(r, c, k, lam, memory, table, feedback)  # noqa: E731
     return jax.vmap(fit)(rows, cases, max_steps, lam0)
 
 
-def _fit_flat_sharded(rows, cases, max_steps, lam0, memory=None, table=None):
+def _fit_flat_sharded(
+    rows, cases, max_steps, lam0, memory=None, table=None, feedback=None
+):
     mesh = Mesh(np.asarray(jax.devices()), ("d",))
     spec = PartitionSpec("d")
     # `check_vma=False`: the per-device bodies are independent (no collectives);
     # each device runs its own Levenberg-Marquardt loop to its own convergence.
     fn = jax.shard_map(
-        ft.partial(_fit_flat, memory=memory, table=table),
+        ft.partial(_fit_flat, memory=memory, table=table, feedback=feedback),
         mesh=mesh,
         in_specs=(spec, spec, spec, spec),
         out_specs=spec,
@@ -319,7 +343,7 @@ def _fit_flat_sharded(rows, cases, max_steps, lam0, memory=None, table=None):
 
 
 _PROGRAMS = {
-    name: jax.jit(fn, static_argnames=("memory", "table"))
+    name: jax.jit(fn, static_argnames=("memory", "table", "feedback"))
     for name, fn in (("one", _fit_flat), ("sharded", _fit_flat_sharded))
 }
 _EXECUTABLES: dict = {}
@@ -366,6 +390,7 @@ def fit_batch(
     *,
     memory: bool | None = None,
     table: bool | None = None,
+    feedback: bool | None = None,
 ) -> RowFit:
     """Fit `N` rows, row `i` on case `i` (both stacked along axis 0), each with its
     own step budget and initial damping.
@@ -376,9 +401,9 @@ def fit_batch(
     dampings are traced, so changing them does not recompile; the cost of a batch is
     that of its longest-running row. `while_compiling` is called once the program
     for these shapes is traced, if it has to be compiled (work to overlap with it).
-    `memory`, `table`: whether the rows need the input-memory scan and the table
-    look-up, when that is known for every batch of a call (a smaller program);
-    None (default) decides per batch at run time.
+    `memory`, `table`, `feedback`: whether the rows need the input-memory scan,
+    the table look-up and the feedback loop, when that is known for every batch
+    of a call (a smaller program); None (default) decides per batch at run time.
     """
     args = (
         rows,
@@ -388,6 +413,6 @@ def fit_batch(
     )
     n_dev = jax.device_count()
     sharded = n_dev > 1 and rows.theta0.shape[0] % n_dev == 0
-    flags = {"memory": memory, "table": table}
+    flags = {"memory": memory, "table": table, "feedback": feedback}
     kind = "sharded" if sharded else "one"
     return _executable(kind, args, flags, while_compiling)(*args)

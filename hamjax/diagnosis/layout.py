@@ -32,6 +32,8 @@ from .effects import (
     BacklashEffect,
     DeadZoneEffect,
     ExtraPoleEffect,
+    FeedbackNonlinearityEffect,
+    FrictionEffect,
     OutputNonlinearityEffect,
     ParameterMismatch,
     PreloadEffect,
@@ -40,7 +42,7 @@ from .effects import (
     StartContext,
     TimeDelayEffect,
 )
-from .effects._base import output_half_range, scale_span
+from .effects._base import FLIP_SIGN, output_half_range, scale_span
 from .effects.time_delay import MAX_DELAY
 from .residuals import noise_floor_hf
 
@@ -55,6 +57,8 @@ DETERMINISTIC = (
     TimeDelayEffect(),
     ExtraPoleEffect(),
     OutputNonlinearityEffect(),
+    FrictionEffect(),
+    FeedbackNonlinearityEffect(),
 )
 BUCKETS = (256, 512, 1024, 1536, 2048, 3072, 4096, 6144, 8192, 12288, 16384)
 N_MAX = 4
@@ -233,6 +237,7 @@ def prepare(
     w_est = _response_numpy(plant.linear, u_est, dt)
     w_val = _response_numpy(plant.linear, u_val, dt)
     v = est["v"]
+    dw = np.diff(w_est) / dt if n_est > 1 else np.zeros(1)
     ctx = StartContext(
         v_min=float(v.min()),
         v_max=float(v.max()),
@@ -248,6 +253,9 @@ def prepare(
             q: float(x)
             for q, x in zip(QUANTILES, np.quantile(w_est, QUANTILES), strict=False)
         },
+        dw_half=float(
+            max(abs(np.quantile(dw, 0.98)), abs(np.quantile(dw, 0.02)), 1e-12)
+        ),
     )
     b_disc, ct_num, ct_pad, den_slots, den_lead, den_free = _linear_templates(nom, dt)
     names = slot_names(N_MAX)
@@ -291,19 +299,30 @@ def prepare(
         # which the fit wanders and Levenberg-Marquardt crawls.
         refit = ["gain", *refit]
     P = n_params or len(refit) + MAX_EFFECT_SLOTS
+    # the re-fitted parameters that carry the sign of G F (`FLIP_SIGN`)
+    sign_slots = {
+        NL_PIECEWISE: ("k1", "k2", "l1", "l2"),
+        NL_TABULATED: ("out_scale",),
+    }.get(nom.nl_kind, ("gain",))
     taus_tried = _delay_shortlist(est["y"], w_est)
     rows = []
     for effect in DETERMINISTIC:
         taus = taus_tried if effect.name == "time_delay" else (0,)
         for start in effect.starts(ctx):
+            flip = (
+                {n: -nominal_values[n] for n in sign_slots}
+                if FLIP_SIGN in start
+                else {}
+            )
+            start = {n: x for n, x in start.items() if n != FLIP_SIGN}
             for tau in taus:
                 free_names = refit + list(start)
                 idx = np.full(P, S)
                 idx[: len(free_names)] = [names.index(n) for n in free_names]
                 theta0 = np.zeros(P)
                 for j, n in enumerate(free_names):
-                    if n in start:
-                        raw = raw_from_physical(n, start[n])
+                    if n in start or n in flip:
+                        raw = raw_from_physical(n, {**flip, **start}[n])
                         theta0[j] = (raw - anchor[names.index(n)]) / scale[
                             names.index(n)
                         ]
@@ -350,6 +369,8 @@ def prepare(
         out_centre=f(w_centre),
         out_half=f(w_half),
         y_scale=f(y_scale),
+        u_scale=f(ctx.u_std),
+        dw_half=f(ctx.dw_half),
         prior_weight=f(prior_weight(nominal_uncertainty, noise_std / y_scale)),
     )
     return Prepared(arrays, rows, ctx, nom, n_est, n_val, w_est, w_val, u_val)

@@ -28,9 +28,13 @@ gap the named effect leaves above the noise floor, $1 - \mathrm{shrink}$ (clippe
 to $[0, 1]$; no training case is `unexplained`, so this share is not calibrated),
 and the tried candidates the rest in proportion to
 $\exp(-\tfrac{N}{2T}\log m)$, $T = 3000$ (maximum likelihood of the true class
-among the rivals of a wrong verdict, same family-A cases). Classes never tried
-(`friction`, `feedback_nonlinearity`) get 0. No class is given more than the named
-effect: an excess is moved to the classes below it.
+among the rivals of a wrong verdict, same family-A cases); every class of the
+contract is a candidate. No class is given more than the named effect: an excess
+is moved to the classes below it.
+
+`friction` and `feedback_nonlinearity` joined the candidates after the constants
+were fitted: they are scored as structural verdicts with the same constants, not
+refitted with them.
 """
 
 import math
@@ -41,16 +45,8 @@ from .attribute import DETERMINISTIC_NAMES, NOISE_NAMES
 from .residuals import autocorrelation
 
 
-# The contract's classes: those the diagnosis tries, the two it does not try yet,
-# and `unexplained`.
-CLASSES = (
-    "none",
-    *DETERMINISTIC_NAMES,
-    *NOISE_NAMES,
-    "friction",
-    "feedback_nonlinearity",
-    "unexplained",
-)
+# The contract's classes: those the diagnosis tries, and `unexplained`.
+CLASSES = ("none", *DETERMINISTIC_NAMES, *NOISE_NAMES, "unexplained")
 # Fitted on family A (module docstring): slope of the log-likelihood-ratio term,
 # then the offsets for none, parameter_mismatch, structural, noise verdicts.
 ALPHA = 0.35366278

@@ -184,6 +184,9 @@ def report_markdown(d, name: str = "case", nominal: str | None = None) -> str:
         for k, x in chosen["params"].items():
             if k == "nominal_refit":
                 continue
+            if isinstance(x["value"], str):  # e.g. friction's `velocity`
+                lines.append(f"- {k}: {x['value']}")
+                continue
             lines.append(f"- {k}: {x['value']:.4g} ± {x['std']:.2g}")
         refit = chosen["params"].get("nominal_refit", {})
         if refit:

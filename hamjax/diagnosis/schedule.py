@@ -29,7 +29,7 @@ import numpy as np
 
 from .._results import RESULTS
 from ..simulation.sharding import effective_chunk
-from .augmented import NL_TABULATED, Row, uses_memory
+from .augmented import NL_TABULATED, Row, uses_feedback, uses_memory
 from .fit import LAMBDA0, RowFit, fit_batch, theta_std
 from .layout import Prepared, best_row_per_class, finite_sse
 
@@ -154,12 +154,15 @@ def run_queue(
     rows = [
         jtu.tree_map(lambda *x: np.stack(x), *[r for _, r in p.rows]) for p in preps
     ]  # per case, its rows stacked
-    # The rows that need the input-memory scan (rate limit, backlash) first, together:
-    # the batches (per device) left without any skip that scan (`fit._fit_flat`).
+    # The rows that need the input-memory scan (rate limit, backlash) first, together,
+    # and those that need the feedback loop (friction, feedback nonlinearity) last,
+    # together: the batches (per device) left without any skip that scan, or that
+    # loop (`fit._fit_flat`).
     memory = [np.asarray(uses_memory(r.free)) for r in rows]
+    feedback = [np.asarray(uses_feedback(r.free)) for r in rows]
     order = sorted(  # stable: otherwise in case order
         ((c, k) for c, m in enumerate(memory) for k in range(m.shape[0])),
-        key=lambda ck: not memory[ck[0]][ck[1]],
+        key=lambda ck: (not memory[ck[0]][ck[1]], bool(feedback[ck[0]][ck[1]])),
     )
     queues["screen"].extend(
         Item(c, k, rows[c].theta0[k], LAMBDA0, SCREEN_STEPS, "screen", "always")
@@ -167,11 +170,14 @@ def run_queue(
     )
     # What every batch of the call needs, where that is known in advance (a
     # smaller compiled program); None: decided per batch at run time. A call of
-    # one screening batch gains nothing from skipping the memory scan at run time.
+    # one screening batch gains nothing from skipping the memory scan or the
+    # feedback loop at run time.
     tabulated = {p.nominal.nl_kind == NL_TABULATED for p in preps}
+    one = len(order) <= batch
     flags = {
-        "memory": True if len(order) <= batch else None,
+        "memory": True if one else None,
         "table": tabulated.pop() if len(tabulated) == 1 else None,
+        "feedback": bool(any(f.any() for f in feedback)) if one else None,
     }
 
     def done(item: Item, new: dict) -> None:
@@ -243,7 +249,7 @@ def run_batch(
 ) -> dict:
     """One batch: the items' rows and cases gathered on the host, padded to `batch`
     with copies of the first item at a zero budget. `while_compiling`, `flags`
-    (`memory`, `table`): as in `fit.fit_batch`."""
+    (`memory`, `table`, `feedback`): as in `fit.fit_batch`."""
     pad = batch - len(take)
     items = take + [take[0]] * pad
     pick = lambda name: np.stack(  # noqa: E731

@@ -16,12 +16,14 @@ import scipy.stats as st
 
 import hamjax as hj
 from hamjax.diagnosis.augmented import (
+    EFFECT_SLOTS,
     full_parameters,
     linear_polynomials,
     simulate_augmented,
     simulate_row,
     simulate_rows,
     slot_index,
+    uses_feedback,
     uses_memory,
 )
 from hamjax.diagnosis.effects.backlash import play_step
@@ -56,7 +58,7 @@ def test_effects_neutral_exactly(getkey):
     assert jnp.array_equal(saturate(v, -inf, inf), v)
     assert jnp.array_equal(add_preload(v, v, 0.0), v)
     assert jnp.array_equal(delay(v, jnp.asarray(0)), v)
-    assert jnp.array_equal(output_map(v, 0.3, 2.0, 0.0, 0.0, -inf, inf, 0.0), v)
+    assert jnp.array_equal(output_map(v, 0.3, 2.0, 0.0, 0.0, -inf, inf, 0.0, 0.0), v)
     assert jnp.array_equal(ar1_errors(v, 0.0), v)
     assert jnp.array_equal(local_level_errors(v, 0.0), v)
 
@@ -178,7 +180,7 @@ def test_vmap_rows_equals_loop():
 
 
 def test_slot_layout():
-    assert slot_index("den1", N_MAX) == slot_index("out_db", N_MAX) + 1
+    assert slot_index("den1", N_MAX) == slot_index(EFFECT_SLOTS[-1], N_MAX) + 1
 
 
 @pytest.mark.statistical
@@ -242,15 +244,17 @@ def test_blocked_normal_equations_equal_the_full_record_jacobian(plant, getkey):
     for name, row in prep.rows:
         theta = row.theta0 + 0.2 * jr.normal(getkey(), row.theta0.shape)
         ref = reference(theta, row)
-        # skipping the memory scan or the table is exact where they are unused
-        for flags in ((on, on), (uses_memory(row.free), jnp.asarray(tabulated))):
+        # skipping the memory scan, the table or the feedback loop is exact where
+        # they are unused
+        used = (uses_memory(row.free), jnp.asarray(tabulated), uses_feedback(row.free))
+        for flags in ((on, on, on), used):
             for got, want in zip(blocked(theta, row, A, *flags), ref, strict=True):
                 scale = float(jnp.max(jnp.abs(want)))
                 assert np.allclose(got, want, rtol=1e-9, atol=1e-9 * scale), name
     if tabulated:  # and the table is not skipped silently where it is used
         row = prep.rows[0][1]
-        sse = blocked(row.theta0, row, A, on, on)[0]
-        assert not np.isclose(sse, blocked(row.theta0, row, A, on, ~on)[0])
+        sse = blocked(row.theta0, row, A, on, on, on)[0]
+        assert not np.isclose(sse, blocked(row.theta0, row, A, on, ~on, on)[0])
 
 
 def test_diagnosis_without_float64_is_refused():

@@ -7,7 +7,7 @@ import pytest
 
 from hamjax.diagnosis.augmented import CHAIN, EFFECT_SLOTS, raw_from_physical
 from hamjax.diagnosis.effects import StartContext
-from hamjax.diagnosis.effects._base import UNIT_MAX
+from hamjax.diagnosis.effects._base import FLIP_SIGN, UNIT_MAX
 from hamjax.diagnosis.layout import DETERMINISTIC, QUANTILES
 
 
@@ -24,6 +24,7 @@ CTX = StartContext(
     w_quantiles={
         q: float(x) for q, x in zip(QUANTILES, np.linspace(-4, 5, 11), strict=True)
     },
+    dw_half=3.0,
 )
 
 
@@ -42,7 +43,7 @@ def test_an_effect_declares_everything_about_its_slots(effect):
     assert all(math.isfinite(s) and s > 0 for s in scales.values())
     assert set(effect.positive) | set(effect.unit_interval) <= set(effect.slots)
     for start in effect.starts(CTX):
-        assert set(start) <= set(effect.slots)
+        assert set(start) - {FLIP_SIGN} <= set(effect.slots)
         for slot, value in start.items():
             if slot in effect.positive:
                 assert value >= 0

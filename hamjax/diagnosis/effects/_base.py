@@ -17,6 +17,7 @@ class StartContext(eqx.Module):
     u_quantiles: dict  # quantile level -> value of the nominal u = F(v)
     u_std: float
     w_quantiles: dict  # quantile level -> value of the nominal output w
+    dw_half: float  # half range of the nominal output's rate dw/dt (2 %/98 % rule)
 
 
 class AbstractEffect(eqx.Module):
@@ -32,7 +33,10 @@ class AbstractEffect(eqx.Module):
       $[0, 1)$ (a pole), see `unit_raw` and `UNIT_MAX`;
     - `scales(ctx)`: the step of one unit of the fitted parameter, per slot;
     - `starts(ctx)`: starting values (multi-start under `vmap`), each a
-      `{slot: value}` dict in physical units.
+      `{slot: value}` dict in physical units; the key `FLIP_SIGN` (not a slot)
+      starts the re-fitted nominal model with its output negated (the sign of
+      $G F$ flipped: the gain, the slopes and levels of a piecewise-linear map, or
+      a table's output scale), for an effect that hides the sign.
     """
 
     name: ClassVar[str]
@@ -48,6 +52,8 @@ class AbstractEffect(eqx.Module):
     def starts(self, ctx: StartContext) -> list[dict[str, float]]:
         return [{}]
 
+
+FLIP_SIGN = "flip_sign"  # a start key: the nominal re-fit starts with -G F
 
 UNIT_MAX = 0.995  # a unit-interval slot is 0.995 * sigmoid(raw): inside [0, 1), smooth
 

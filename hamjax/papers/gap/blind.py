@@ -17,8 +17,14 @@ Modes:
   leaves, below what anyone would call a mismatch); effect shapes outside the
   catalogue forms (soft saturation, asymmetric dead zone, backlash with
   stick-slip, fractional delay, second-order lag, smooth preload, tanh/cubic
-  sensors, random-walk drift); effect RMS from 0.3 x the noise std up; records of
-  1000-4000 samples.
+  sensors, random-walk drift, Stribeck friction with a viscous part, a quintic
+  part on a cubic stiffness, an asymmetric clearance); effect RMS from 0.3 x the
+  noise std up; records of 1000-4000 samples.
+
+`friction` and `feedback_nonlinearity` (a force fed back from the output to the
+input of the linear block, simulated in one loop, `_lsim_loop`) replace a case's
+class with probability 2/14 from a key of their own (`FIRST_DRAW`): the other
+cases of a seed are those drawn before these two classes existed.
 """
 
 import math
@@ -41,15 +47,21 @@ from ...models import (
 from ...models.nonlinearities.piecewise_linear import piecewise_linear_map
 
 
-# The contract's names, in its order: none, the deterministic effects, the noise ones.
+# The contract's names: none, the deterministic effects, the noise ones.
 EFFECTS = ("none", *DETERMINISTIC_NAMES, *NOISE_NAMES)
 DETERMINISTIC = DETERMINISTIC_NAMES
-# The truth classes a benchmark may hold: every contract name (family B draws
-# `friction` and `feedback_nonlinearity`, which the diagnosis does not try yet).
+# The truth classes a benchmark may hold: every contract name.
 TRUTH_CLASSES = tuple(c for c in CONTRACT_CLASSES if c != "unexplained")
 # Names that say "a valve sticks" on a control loop (docs/control-loops.md): the
 # contract's stiction class and the input-path effects a sticky valve resembles.
 STICTION_LIKE = ("backlash", "dead_zone", "preload", "friction")
+# The classes drawn before the feedback effects existed, in the order of the first
+# draw (kept, so a seed still makes the same cases), and the feedback effects, which
+# replace a case's class with probability 2/14 (every class then 1/14) from a key
+# of their own: the cases not replaced are the cases of before, draw for draw.
+FEEDBACK_EFFECTS = ("friction", "feedback_nonlinearity")
+FIRST_DRAW = tuple(e for e in EFFECTS if e not in FEEDBACK_EFFECTS)
+_FEEDBACK_KEY = 611953  # folded into a case's key for the replacement draw
 
 
 class _Draw:
@@ -150,6 +162,45 @@ def _lsim(linear, u: np.ndarray, dt: float) -> np.ndarray:
     for k, uk in enumerate(u):
         y[k] = C[0] @ x + D[0, 0] * uk
         x = A @ x + B[:, 0] * uk
+    return y
+
+
+def _lsim_loop(linear, s: np.ndarray, dt: float, forces) -> np.ndarray:
+    """Response from rest with fed-back forces `(phi, f)`: $u_k = s_k - \\phi(w_k)
+    - f(w_{k+1}, (w_{k+1} - w_k)/dt)$, $w_k = C x_k$ (the strictly proper blocks
+    drawn here), $w_{k+1} = C(A x_k + B u_k)$: the friction acts on the velocity
+    over the step, the implicit equation solved by bisection (60 halvings of
+    $s'_k \\pm$ `f`'s bound; for $c\\,\\mathrm{sign}$ this is the stick-slip
+    discretisation: the velocity stays 0 while the drive is below $c$)."""
+    phi, f, bound = forces
+    if isinstance(linear, DiscreteTransferFunction):
+        import scipy.signal as sg
+
+        b, a = np.asarray(linear.b, float), np.asarray(linear.a, float)
+        b = np.r_[b, np.zeros(max(len(a) - len(b), 0))]  # in q^-1: pad the end
+        # highest power of z first, the leading zeros (the delay) stripped
+        a = np.r_[a, np.zeros(len(b) - len(a))]
+        A, B, C, _ = sg.tf2ss(np.trim_zeros(b, "f"), a)
+    else:
+        ss = linear.discretise(dt)
+        A, B, C = (np.asarray(x) for x in (ss.A, ss.B, ss.C))
+    x = np.zeros(A.shape[0])
+    y = np.empty_like(s)
+    c_ax, c_b = C[0] @ A, float(C[0] @ B[:, 0])
+    for k, sk in enumerate(s):
+        w = float(C[0] @ x)
+        s2 = sk - phi(w)
+        alpha = float(c_ax @ x)
+        lo, hi = s2 - bound, s2 + bound
+        for _ in range(60 if bound > 0 else 0):
+            mid = 0.5 * (lo + hi)
+            w_next = alpha + c_b * mid
+            if mid - s2 + f(w_next, (w_next - w) / dt) > 0:
+                hi = mid
+            else:
+                lo = mid
+        y[k] = w
+        x = A @ x + B[:, 0] * (0.5 * (lo + hi))
     return y
 
 
@@ -258,10 +309,42 @@ class _Truth:
             u = _lfilter(np.array([1 - p["p"]]), np.array([1.0, -p["p"]]), u)
             if self.realistic:
                 u = _lfilter(np.array([1 - p["p2"]]), np.array([1.0, -p["p2"]]), u)
-        w = _lsim(lin, u, dt)
+        if e in FEEDBACK_EFFECTS:
+            w = _lsim_loop(lin, u, dt, self._force())
+        else:
+            w = _lsim(lin, u, dt)
         if e == "output_nonlinearity":
             w = self._output_map(w)
         return w
+
+    def _force(self):
+        """`(phi, f, bound)` of `_lsim_loop`: `friction` (Coulomb on the output or
+        its derivative; realistic: smooth, Stribeck rise and a viscous part) or
+        `feedback_nonlinearity` (cubic stiffness or a clearance; realistic: a
+        quintic part, an asymmetric clearance)."""
+        p = self.params
+        none = lambda *_: 0.0  # noqa: E731
+        if self.effect == "friction":
+
+            def friction(v_w, v_dw):
+                s = v_w if p["velocity"] == "output" else v_dw
+                if not self.realistic:
+                    return p["c"] * np.sign(s)
+                rise = 1 + p["stribeck"] * np.exp(-((s / p["vs"]) ** 2))
+                return p["c"] * rise * np.tanh(s / p["eps"]) + p["viscous"] * s
+
+            # a bound on |f| over the velocities a step can reach (viscous part:
+            # up to 100 x the velocity scale, far beyond any)
+            bound = p["c"] * (1 + p["stribeck"]) + p["viscous"] * 100 * p["v_scale"]
+            return none, friction, bound
+        W, U = p["scale"], p["u_scale"]
+
+        def feedback(w):
+            if p["shape"] == "cubic":
+                return U * (p["k"] * (w / W) ** 3 + p["k5"] * (w / W) ** 5)
+            return p["k"] * U / W * (w - np.clip(w, -p["b"], p["b_hi"]))
+
+        return feedback, none, 0.0
 
     def _output_map(self, w):
         p = self.params
@@ -336,7 +419,9 @@ def _draw_case(key, realism: str) -> dict | None:
     realistic = realism == "realistic"
     d = _Draw(key)
     dt = 0.05
-    effect = d.choice(EFFECTS)
+    effect = d.choice(FIRST_DRAW)
+    if float(jr.uniform(jr.fold_in(key, _FEEDBACK_KEY))) < 2 / 14:
+        effect = FEEDBACK_EFFECTS[int(jr.bernoulli(jr.fold_in(key, _FEEDBACK_KEY + 1)))]
     n = d.integer(1000, 4000) if realistic else 2000
     kinds = (
         ("identity", "tabulated")
@@ -402,6 +487,24 @@ def _draw_case(key, realism: str) -> dict | None:
         params["lo"] = float(np.quantile(w_nom_est, d.uniform(0.03, 0.2)))
         params["hi"] = float(np.quantile(w_nom_est, d.uniform(0.8, 0.97)))
         params["b"] = d.uniform(0.05, 0.2) * W
+    elif effect == "friction":
+        params["velocity"] = d.choice(("output", "derivative"))
+        rate = np.abs(np.diff(w_nom_est)) / dt
+        V = W if params["velocity"] == "output" else np.quantile(rate, 0.98)
+        params["v_scale"] = float(V)
+        params["v_scale"] = float(V)
+        params["c"] = d.uniform(0.05, 0.3) * float(np.std(u_est))
+        params["eps"] = d.uniform(0.005, 0.02) * V
+        params["stribeck"] = d.uniform(0.0, 0.5) if realistic else 0.0
+        params["vs"] = d.uniform(0.05, 0.2) * V
+        params["viscous"] = d.uniform(0.0, 0.1) * float(np.std(u_est)) / V
+    elif effect == "feedback_nonlinearity":
+        params["shape"] = d.choice(("cubic", "clearance"))
+        params["scale"], params["u_scale"] = W, float(np.std(u_est))
+        params["k"] = d.uniform(0.1, 0.5)
+        params["k5"] = d.uniform(0.0, 0.5) * params["k"] if realistic else 0.0
+        params["b"] = d.uniform(0.1, 0.4) * W
+        params["b_hi"] = params["b"] * (d.uniform(0.5, 1.5) if realistic else 1.0)
     truth = _Truth(
         truth_plant,
         effect if effect != "parameter_mismatch" else "none",
@@ -416,6 +519,11 @@ def _draw_case(key, realism: str) -> dict | None:
         name: _lsim(nominal.linear, _static(nominal.nonlinearity, v), dt)
         for name, v in (("estimation", v_est), ("validation", v_val))
     }
+    # a feedback loop the drawn force drives unstable is no plant: draw again
+    if not all(np.all(np.isfinite(w)) for w in ws.values()) or max(
+        _rms(ws[k]) for k in ws
+    ) > 100 * max(_rms(w_nominal[k]) for k in ws):
+        return None
     # the effect must show in both records: the smaller of the two sets the scale
     effect_rms = min(
         _rms(ws[name] - w_nominal[name]) for name in ("estimation", "validation")

@@ -7,6 +7,7 @@ import numpy as np
 import scipy.linalg
 
 from ..models import (
+    Backlash,
     ContinuousTransferFunction,
     DiscreteTransferFunction,
     Hammerstein,
@@ -14,10 +15,12 @@ from ..models import (
     PiecewiseLinear,
     Tabulated,
 )
+from ..models.hammerstein import fold_output_scale
 from ..models.nonlinearities.piecewise_linear import piecewise_linear_map
 from .augmented import (
     EFFECT_NEUTRAL,
     EFFECT_SLOTS,
+    NL_BACKLASH,
     NL_IDENTITY,
     NL_PIECEWISE,
     NL_TABULATED,
@@ -107,22 +110,57 @@ class Nominal:
     nl_kind: int
     pl: np.ndarray  # k1 k2 d1 d2 l1 l2
     tab_v: np.ndarray
-    tab_u: np.ndarray
+    tab_u: np.ndarray  # the map, or a backlash's ascending border
+    tab_d: np.ndarray  # a backlash's descending border (else `tab_u`)
     is_ct: bool
     b: np.ndarray  # discrete numerator / continuous numerator (highest power first)
     den: np.ndarray  # discrete a (a[0] = 1) / continuous den (highest power first)
     order: int
 
 
+def _tables(nl, tab_v: np.ndarray, tab_u: np.ndarray, tab_d: np.ndarray | None):
+    if tab_v.shape[0] > T_MAX:
+        raise ValueError(
+            f"{type(nl).__name__} map has {tab_v.shape[0]} points (at most {T_MAX})"
+        )
+    return tab_v, tab_u, tab_u if tab_d is None else tab_d
+
+
+def _backlash_tables(nl: Backlash):
+    """The borders of a backlash tabulated on one grid, centred in the play at
+    the start (the `model.json` form and convention), else `ValueError`."""
+    asc, desc = nl.ascending, nl.descending
+    if not (
+        isinstance(asc, Tabulated)
+        and isinstance(desc, Tabulated)
+        and np.array_equal(np.asarray(asc.v), np.asarray(desc.v))
+    ):
+        raise ValueError(
+            "a backlash nominal needs both borders tabulated on one grid (the "
+            "model.json form)"
+        )
+    if nl.u0 is not None:
+        raise ValueError(
+            "a backlash nominal starts centred in its play (u0 = None, the "
+            "model.json convention)"
+        )
+    grid = np.asarray(asc.v, float)
+    return _tables(nl, grid, np.asarray(asc.u, float), np.asarray(desc.u, float))
+
+
 def describe_nominal(plant: Hammerstein) -> Nominal:
-    """Read the parameters the diagnosis may re-fit off a nominal plant.
+    """Read the parameters the diagnosis may re-fit off a nominal plant (a
+    backlash nominal's output scale folded into its linear block first:
+    `fold_output_scale`).
 
     **Raises:** `ValueError` for a nonlinearity or linear block outside the
     `model.json` kinds handled by the diagnosis, or an order above `N_MAX`.
     """
+    plant = fold_output_scale(plant)
     nl, lin = plant.nonlinearity, plant.linear
     pl = np.array([1.0, 1.0, 0.0, 0.0, 0.0, 0.0])
     tab_v, tab_u = np.array([-1.0, 1.0]), np.array([-1.0, 1.0])
+    tab_d = tab_u
     if isinstance(nl, Identity):
         kind = NL_IDENTITY
     elif isinstance(nl, PiecewiseLinear):
@@ -132,15 +170,16 @@ def describe_nominal(plant: Hammerstein) -> Nominal:
         )
     elif isinstance(nl, Tabulated):
         kind = NL_TABULATED
-        tab_v, tab_u = np.asarray(nl.v, float), np.asarray(nl.u, float)
-        if tab_v.shape[0] > T_MAX:
-            raise ValueError(
-                f"tabulated map has {tab_v.shape[0]} points (at most {T_MAX})"
-            )
+        tab_v, tab_u, tab_d = _tables(
+            nl, np.asarray(nl.v, float), np.asarray(nl.u, float), None
+        )
+    elif isinstance(nl, Backlash):
+        kind = NL_BACKLASH
+        tab_v, tab_u, tab_d = _backlash_tables(nl)
     else:
         raise ValueError(
-            f"the diagnosis handles identity, piecewise_linear and tabulated maps; got "
-            f"{type(nl).__name__} (a backlash nominal is not supported yet)"
+            "the diagnosis handles identity, piecewise_linear, tabulated and "
+            f"backlash maps; got {type(nl).__name__}"
         )
     if isinstance(lin, DiscreteTransferFunction):
         b, den, ct = np.asarray(lin.b, float), np.asarray(lin.a, float), False
@@ -156,15 +195,17 @@ def describe_nominal(plant: Hammerstein) -> Nominal:
         )
     if order < 1:
         raise ValueError("the linear block must have at least one pole")
-    return Nominal(kind, pl, tab_v, tab_u, ct, b, den, order)
+    return Nominal(kind, pl, tab_v, tab_u, tab_d, ct, b, den, order)
 
 
-def _pad_table(v: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _pad_table(v: np.ndarray, *us: np.ndarray) -> tuple[np.ndarray, ...]:
+    """`v` and each table `us` padded to `T_MAX` points (constant beyond `v[-1]`,
+    as `np.interp` extrapolates)."""
     extra = T_MAX - v.shape[0]
     step = max(abs(v[-1]) + abs(v[0]), 1.0) * 1e6
     return (
         np.concatenate([v, v[-1] + step * np.arange(1, extra + 1)]),
-        np.concatenate([u, np.full(extra, u[-1])]),
+        *(np.concatenate([u, np.full(extra, u[-1])]) for u in us),
     )
 
 
@@ -229,6 +270,7 @@ def prepare(
 
     `nominal_uncertainty`: the relative std of the nominal parameters, the prior
     of every re-fit (`prior_weight`); None for a negligible prior."""
+    plant = fold_output_scale(plant)
     nom = describe_nominal(plant)
     n_est, n_val = est["v"].shape[0], val["v"].shape[0]
     L = length or bucket(max(n_est, n_val))
@@ -290,7 +332,7 @@ def prepare(
     refit = [f"den{j + 1}" for j in den_free]
     if nom.nl_kind == NL_PIECEWISE:
         refit += ["k1", "k2", "d1", "d2", "l1", "l2"]
-    elif nom.nl_kind == NL_TABULATED:
+    elif nom.nl_kind in (NL_TABULATED, NL_BACKLASH):
         refit += ["in_scale", "out_scale"]
     else:
         # With a piecewise-linear or tabulated map the static gain is not a
@@ -303,6 +345,7 @@ def prepare(
     sign_slots = {
         NL_PIECEWISE: ("k1", "k2", "l1", "l2"),
         NL_TABULATED: ("out_scale",),
+        NL_BACKLASH: ("out_scale",),
     }.get(nom.nl_kind, ("gain",))
     taus_tried = _delay_shortlist(est["y"], w_est)
     rows = []
@@ -338,7 +381,7 @@ def prepare(
                         ),
                     )
                 )
-    tab_v, tab_u = _pad_table(nom.tab_v, nom.tab_u)
+    tab_v, tab_u, tab_d = _pad_table(nom.tab_v, nom.tab_u, nom.tab_d)
     v_est, m_est = _pad_record(est["v"], L)
     y_est, _ = _pad_record(est["y"], L)
     v_val, m_val = _pad_record(val["v"], L)
@@ -359,6 +402,7 @@ def prepare(
         nl_kind=np.asarray(nom.nl_kind),
         tab_v=f(tab_v),
         tab_u=f(tab_u),
+        tab_d=f(tab_d),
         b_disc=f(b_disc),
         ct_num=f(ct_num),
         ct_pad=f(ct_pad),
@@ -395,7 +439,7 @@ def n_free_parameters(plant: Hammerstein) -> int:
     """Width of the compact parameter vector this plant's rows need."""
     nom = describe_nominal(plant)
     n_den = nom.order if nom.is_ct else nom.den.shape[0] - 1
-    nl = {NL_PIECEWISE: 6, NL_TABULATED: 2}.get(nom.nl_kind, 1)  # 1: the gain
+    nl = {NL_PIECEWISE: 6, NL_TABULATED: 2, NL_BACKLASH: 2}.get(nom.nl_kind, 1)
     return n_den + nl + MAX_EFFECT_SLOTS
 
 
@@ -477,9 +521,32 @@ def _static_numpy(nom: Nominal, v: np.ndarray) -> np.ndarray:
         return piecewise_linear_map(v, *nom.pl, xp=np)
     if nom.nl_kind == NL_TABULATED:
         return np.interp(v, nom.tab_v, nom.tab_u)
+    if nom.nl_kind == NL_BACKLASH:
+        return _backlash_numpy(nom, np.asarray(v, float))
     return np.asarray(v, float)
+
+
+def _backlash_numpy(nom: Nominal, v: np.ndarray) -> np.ndarray:
+    """`Backlash.step` over `v` from its default start (centred in the play at
+    `v[0]`), on Python floats (no compilation per record length)."""
+    grid, fa_all, fd_all = nom.tab_v, nom.tab_u, nom.tab_d
+    fa, fd = np.interp(v, grid, fa_all).tolist(), np.interp(v, grid, fd_all).tolist()
+    v = v.tolist()
+    u = (fa[0] + fd[0]) / 2
+    on_a, on_d, v_prev = u == fa[0], u == fd[0], v[0]
+    out = np.empty(len(v))
+    for k, vk in enumerate(v):
+        rising, falling = vk > v_prev, vk < v_prev
+        take_a = rising and (on_a or fa[k] >= u)
+        take_d = falling and (on_d or fd[k] <= u)
+        u = fa[k] if take_a else fd[k] if take_d else u
+        if rising or falling:
+            on_a, on_d = take_a or u == fa[k], take_d or u == fd[k]
+        v_prev, out[k] = vk, u
+    return out
 
 
 def nominal_output(plant: Hammerstein, v: np.ndarray, dt: float) -> np.ndarray:
     """The nominal plant's output from rest for the input samples `v` (NumPy)."""
+    plant = fold_output_scale(plant)
     return _response_numpy(plant.linear, _static_numpy(describe_nominal(plant), v), dt)

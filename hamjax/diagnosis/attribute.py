@@ -166,6 +166,10 @@ def _params(prep: Prepared, fit: dict, row: int, effect: str) -> dict:
         i = names.index(name)
         if free[i]:
             out[name] = {"value": float(phys[i]), "std": float(std_full[i])}
+    if effect == "backlash" and "slip_jump" not in out:
+        # a plain play operator: no slip jump (reported, so that a sticky-valve
+        # reading sees S and J side by side)
+        out["slip_jump"] = {"value": 0.0, "std": 0.0}
     if effect == "friction":
         used = {n for n in EFFECT_SLOT_NAMES[effect] if free[names.index(n)]}
         # which velocity the friction acts on: "output" (s = w) or "derivative"

@@ -153,15 +153,21 @@ def test_backlash_model_json_diagnosed_through_the_cli(tmp_path, capsys):
 
 def test_stick_slip_normal_equations_match_finite_differences():
     # J^T J and J^T r of the blocked forward-mode Jacobian against central
-    # differences of the simulated residual, at a point of a sticky row where no
-    # slip instant is within 100 steps h of its threshold (so the differences
-    # see the same slips: the exact model is smooth there). Central differences
-    # err by O(h^2 |y'''|) ~ 1e-12 and by rounding ~ eps/h ~ 1e-10 relative.
+    # differences of the simulated residual, at a point of a sticky row away from
+    # the slip instants: no sample within 100 steps h of the threshold (the
+    # differences see the same slips: the exact model is smooth there) and no
+    # slip overshooting it by less than the tangent's width `v_step` (where the
+    # slip instants' tangent acts, `stick_slip_step`). The input: levels with a
+    # slow creep inside each (v_step = the creep's 1e-3 per sample). Central
+    # differences err by rounding ~ eps/h ~ 1e-10 relative: 1e-6 is ample.
     plant, _ = load_model({**MODEL, "nonlinearity": {"kind": "identity"}})
     est, val = _records(2)
+    for rec in (est, val):
+        rec["v"] = rec["v"] + 1e-3 * (np.arange(300) % 25)
     est["y"] = np.random.default_rng(3).normal(size=300)
     prep = prepare(plant, DT, est, val, length=512)
     case = prep.arrays
+    assert np.isclose(float(case.v_step), 1e-3)
     jump_slot = slot_index("slip_jump", N_MAX)
     row = next(r for n, r in prep.rows if n == "backlash" and r.free[jump_slot])
     theta = row.theta0 + 0.1
@@ -172,13 +178,16 @@ def test_stick_slip_normal_equations_match_finite_differences():
 
     p = full_parameters(theta, row, case)
     width, jump = (float(named(p, case)(k)) for k in ("backlash", "slip_jump"))
-    x, margin = float(case.v_est[0]), np.inf
-    for vk in np.asarray(case.v_est[: prep.n_est]):
-        margin = min(margin, abs(abs(vk - x) - (width + jump) / 2))
-        x = float(stick_slip_step(x, vk, width, jump))
     h = 1e-6
     # h moves the threshold (S + J)/2 by at most h times the slots' scales
-    assert margin > 100 * h * float(np.max(case.scale[jump_slot - 1 : jump_slot + 1]))
+    near = 100 * h * float(np.max(case.scale[jump_slot - 1 : jump_slot + 1]))
+    x, slips = float(case.v_est[0]), 0
+    for vk in np.asarray(case.v_est[: prep.n_est]):
+        over = abs(vk - x) - (width + jump) / 2
+        assert abs(over) > near and not (0 < over < float(case.v_step) + near)
+        slips += over > 0
+        x = float(stick_slip_step(x, vk, width, jump))
+    assert slips > 3
     r0 = residual(theta)
     J = np.stack(
         [

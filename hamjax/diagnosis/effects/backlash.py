@@ -34,7 +34,7 @@ def stick_slip_step(
     jump: Float[Array, ""],
     soft: Float[Array, ""] | float = 0.0,
 ) -> Float[Array, ""]:
-    """One step of the play operator of width $S$ with a slip jump $J$:
+    r"""One step of the play operator of width $S$ with a slip jump $J$:
     $x_k = v_k - f_d$ if $x_{k-1} < v_k - f_s$, $v_k + f_d$ if
     $x_{k-1} > v_k + f_s$, else $x_{k-1}$ (stuck), with $f_s = (S + J)/2$,
     $f_d = (S - J)/2$ (He et al. 2007, Fig. 3: $u_r = v - x$ slips when

@@ -129,9 +129,6 @@ class CaseArrays(eqx.Module):
     y_scale: Float[Array, ""]
     u_scale: Float[Array, ""]  # std of the nominal u = F(v) (estimation)
     dw_half: Float[Array, ""]  # velocity scale of dw/dt (`StartContext.dw_half`)
-    # the input's typical change per sample (`StartContext.v_step`): the width of
-    # the slip jump's tangent (`effects.backlash.stick_slip_step`)
-    v_step: Float[Array, ""]
     # weight of the Gaussian prior at nominal on the scaled re-fit parameters
     # (`layout.prior_weight`, the user's stated nominal uncertainty)
     prior_weight: Float[Array, ""]
@@ -423,7 +420,6 @@ def memory_scan(
     max_step: Float[Array, ""],
     width: Float[Array, ""],
     jump: Float[Array, ""],
-    soft: Float[Array, ""],
     nominal: NominalBacklash,
     table: bool | Bool[Array, ""] = True,
 ) -> tuple[tuple, Float[Array, " B"]]:
@@ -435,7 +431,7 @@ def memory_scan(
     def step(carry, vk, with_nominal):
         xr, xb, bl = carry
         xr = rate_limit_step(xr, vk, max_step)
-        xb = stick_slip_step(xb, xr, width, jump, soft)
+        xb = stick_slip_step(xb, xr, width, jump)
         if not with_nominal:
             return (xr, xb, bl), xb
         bl, x = nominal.step(bl, xb)
@@ -454,14 +450,13 @@ def input_memory(
     max_step: Float[Array, ""],
     width: Float[Array, ""],
     jump: Float[Array, ""],
-    soft: Float[Array, ""],
     nominal: NominalBacklash,
     table: bool | Bool[Array, ""] = True,
 ) -> Float[Array, " L"]:
     """Rate limit, play (with slip jump) and a backlash nominal, all started at
     $v_0$."""
     state = (v[0], v[0], nominal.init(v[0]))
-    return memory_scan(v, state, max_step, width, jump, soft, nominal, table)[1]
+    return memory_scan(v, state, max_step, width, jump, nominal, table)[1]
 
 
 def named(p: Float[Array, " S"], case: CaseArrays) -> Callable[[str], Array]:
@@ -481,9 +476,8 @@ def filter_coefficients(p: Float[Array, " S"], case: CaseArrays) -> tuple[Array,
 
 
 def memory_arguments(p: Float[Array, " S"], case: CaseArrays) -> tuple:
-    """`(max_step, width, jump, soft, nominal)` of the input-memory scan (rate
-    limit per sample, play with its slip jump and that jump's tangent width, the
-    nominal backlash)."""
+    """`(max_step, width, jump, nominal)` of the input-memory scan (rate limit per
+    sample, play with its slip jump, the nominal backlash)."""
     at = named(p, case)
     nominal = NominalBacklash(
         at("in_scale"),
@@ -493,8 +487,7 @@ def memory_arguments(p: Float[Array, " S"], case: CaseArrays) -> tuple:
         case.tab_d,
         case.nl_kind == NL_BACKLASH,
     )
-    jump = at("slip_jump")
-    return at("rate") * case.dt, at("backlash"), jump, case.v_step, nominal
+    return at("rate") * case.dt, at("backlash"), at("slip_jump"), nominal
 
 
 def static_part(

@@ -298,7 +298,6 @@ def prepare(
         dw_half=float(
             max(abs(np.quantile(dw, 0.98)), abs(np.quantile(dw, 0.02)), 1e-12)
         ),
-        v_step=_typical_step(v),
     )
     b_disc, ct_num, ct_pad, den_slots, den_lead, den_free = _linear_templates(nom, dt)
     names = slot_names(N_MAX)
@@ -416,7 +415,6 @@ def prepare(
         y_scale=f(y_scale),
         u_scale=f(ctx.u_std),
         dw_half=f(ctx.dw_half),
-        v_step=f(ctx.v_step),
         prior_weight=f(prior_weight(nominal_uncertainty, noise_std / y_scale)),
     )
     return Prepared(arrays, rows, ctx, nom, n_est, n_val, w_est, w_val, u_val)
@@ -443,14 +441,6 @@ def n_free_parameters(plant: Hammerstein) -> int:
     n_den = nom.order if nom.is_ct else nom.den.shape[0] - 1
     nl = {NL_PIECEWISE: 6, NL_TABULATED: 2, NL_BACKLASH: 2}.get(nom.nl_kind, 1)
     return n_den + nl + MAX_EFFECT_SLOTS
-
-
-def _typical_step(v: np.ndarray) -> float:
-    """The median of $|v_k - v_{k-1}|$ over the samples where $v$ changes (a
-    staircase's level change, a sampled ramp's increment; never 0)."""
-    dv = np.abs(np.diff(v))
-    dv = dv[dv > 0]
-    return float(max(np.median(dv), 1e-12)) if dv.size else 1e-12
 
 
 def _delay_shortlist(y: np.ndarray, w: np.ndarray, keep: int = 2) -> tuple[int, ...]:

@@ -25,7 +25,6 @@ CTX = StartContext(
         q: float(x) for q, x in zip(QUANTILES, np.linspace(-4, 5, 11), strict=True)
     },
     dw_half=3.0,
-    v_step=0.2,
 )
 
 

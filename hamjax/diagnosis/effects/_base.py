@@ -18,7 +18,6 @@ class StartContext(eqx.Module):
     u_std: float
     w_quantiles: dict  # quantile level -> value of the nominal output w
     dw_half: float  # half range of the nominal output's rate dw/dt (2 %/98 % rule)
-    v_step: float  # median |v[k] - v[k-1]| over the samples where v changes
 
 
 class AbstractEffect(eqx.Module):

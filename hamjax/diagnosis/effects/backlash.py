@@ -9,7 +9,6 @@ where it is until the input has moved more than $f_s$ away from it, then jumps t
 within $f_d$ of the input (a jump of $J$ past the plain play operator).
 """
 
-import jax.lax as lax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
@@ -32,25 +31,17 @@ def stick_slip_step(
     v: Float[Array, ""],
     width: Float[Array, ""],
     jump: Float[Array, ""],
-    soft: Float[Array, ""] | float = 0.0,
 ) -> Float[Array, ""]:
-    r"""One step of the play operator of width $S$ with a slip jump $J$:
+    """One step of the play operator of width $S$ with a slip jump $J$:
     $x_k = v_k - f_d$ if $x_{k-1} < v_k - f_s$, $v_k + f_d$ if
     $x_{k-1} > v_k + f_s$, else $x_{k-1}$ (stuck), with $f_s = (S + J)/2$,
     $f_d = (S - J)/2$ (He et al. 2007, Fig. 3: $u_r = v - x$ slips when
-    $|u_r| > f_s$ and is then $\pm f_d$). With $J = 0$ it is `play_step`
-    exactly, values and tangents.
+    $|u_r| > f_s$ and is then $\\pm f_d$).
 
-    The values are exact. The position after a slip depends on $J$ through $f_d$
-    (derivative $\mp 1/2$); the slip instants depend on $f_s$ alone and carry no
-    derivative, so a Gauss-Newton fit could not move $f_s$. `soft` $= \epsilon >
-    0$ adds one to the tangents only: the input taken linear over the sample
-    interval, moving $\epsilon$ in it, the valve slips at the fraction $1 - o /
-    \epsilon$ of it ($o = |u_r| - f_s$ the overshoot, $0 < o < \epsilon$); the
-    position held over the interval then moves by the slip times $o/\epsilon$,
-    whose derivative (in $f_s$, and in $u_r$) is added to the tangent of $x_k$,
-    its value left unchanged. Away from the slip instants ($o \le 0$ or $o \ge
-    \epsilon$) the tangents are those of the exact step.
+    Exact (no smoothing): the position after a slip depends on $J$ through $f_d$
+    (derivative $\\mp 1/2$), the instants of the slips only through $f_s$ (no
+    derivative: a fit moves $f_d$ at fixed $f_s$, which the starts place). With
+    $J = 0$ it is `play_step` exactly, values and tangents.
     """
     kinetic, static = (width - jump) / 2, (width + jump) / 2
     slip = jnp.where(
@@ -58,10 +49,6 @@ def stick_slip_step(
         v - kinetic,
         jnp.where(x_prev > v + static, v + kinetic, x_prev),
     )
-    eps = jnp.maximum(soft, jnp.finfo(v.dtype).tiny)
-    frac = jnp.clip((jnp.abs(v - x_prev) - static) / eps, 0.0, 1.0)
-    frac = jnp.where(soft > 0, frac, 0.0)
-    slip = slip + lax.stop_gradient(slip - x_prev) * (frac - lax.stop_gradient(frac))
     return jnp.where(jump > 0, slip, play_step(x_prev, v, width))
 
 

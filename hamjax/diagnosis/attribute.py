@@ -98,6 +98,7 @@ import numpy as np
 from .augmented import EFFECT_SLOTS, NL_PIECEWISE, slot_names
 from .layout import (
     DETERMINISTIC,
+    LR_ALPHA,
     N_MAX,
     Prepared,
     best_row_per_class,
@@ -109,7 +110,6 @@ from .residuals import improvement_z, noise_floor_hf
 
 Z_STAR = 3.5
 Z_STRUCT = 3.0  # structural vs re-fit: one comparison per case, t_19 at ~0.4 %
-LR_ALPHA = 1e-3  # level of the nested likelihood-ratio test (before Bonferroni)
 Z_CONFIRM = 2.0  # validation z that confirms a candidate the likelihood ratio picked
 RHO = 0.02
 SHRINK_EXPLAINED = 0.5

@@ -72,6 +72,7 @@ QUANTILES = (0.02, 0.05, 0.1, 0.2, 0.3, 0.5, 0.7, 0.8, 0.9, 0.95, 0.98)
 # magnitude (slopes, gain, scales, denominator coefficients) or by half of it times
 # the input range (breakpoints and levels of a piecewise-linear map).
 RELATIVE_STEP = 0.1
+LR_ALPHA = 1e-3  # level of the nested likelihood-ratio tests (before Bonferroni)
 PRIOR_FLOOR = 1e-6  # the prior's weight without a stated uncertainty (a tie-break)
 NOMINAL_UNCERTAINTY = 0.2  # default relative std of the nominal parameters
 
@@ -427,10 +428,34 @@ def finite_sse(fits: dict) -> np.ndarray:
 
 def best_row_per_class(prep: Prepared, sse: np.ndarray) -> dict[str, int]:
     """`{class name: its row with the lowest estimation SSE}` (first one on ties);
-    the finishing stage and the attribution must agree on it."""
+    the finishing stage and the attribution must agree on it.
+
+    A row that frees an `extension` slot of its effect (the slip jump of a
+    backlash) stands for the class only if it beats the class's best row without
+    one by the nested likelihood ratio $(S_0 - S_1) / (S_1 / (n - p_1)) >
+    2 \\ln(1 / \\alpha)$ ($\\chi^2_1$ under white noise; the bound of
+    `attribute._nested_lr` for one comparison): the extra slot must earn its place
+    on estimation data, as the effect must over the re-fit."""
+    names = slot_names(N_MAX)
+    extension = {e.name: [names.index(s) for s in e.extension] for e in DETERMINISTIC}
     best: dict[str, int] = {}
-    for k, (name, _) in enumerate(prep.rows):
-        if name not in best or sse[k] < sse[best[name]]:
+    best_ext: dict[str, int] = {}
+    for k, (name, row) in enumerate(prep.rows):
+        cols = extension.get(name, [])
+        table = best_ext if any(row.free[i] for i in cols) else best
+        if name not in table or sse[k] < sse[table[name]]:
+            table[name] = k
+    threshold = 2.0 * np.log(1.0 / LR_ALPHA)
+    n_slots = prep.arrays.anchor.shape[0]
+    for name, k in best_ext.items():
+        if name not in best:
+            best[name] = k
+            continue
+        p = int(np.sum(np.asarray(prep.rows[k][1].idx) < n_slots))
+        s2 = sse[k] / max(prep.n_est - p, 1)
+        if s2 > 0 and (sse[best[name]] - sse[k]) / s2 > threshold:
+            best[name] = k
+        elif s2 == 0 and sse[k] < sse[best[name]]:
             best[name] = k
     return best
 

@@ -60,6 +60,7 @@ class BacklashEffect(AbstractEffect):
     slots = ("backlash", "slip_jump")
     neutral = {"backlash": 0.0, "slip_jump": 0.0}
     positive = ("backlash", "slip_jump")
+    extension = ("slip_jump",)
 
     def scales(self, ctx: StartContext) -> dict[str, float]:
         unit = 0.05 * scale_span(ctx)

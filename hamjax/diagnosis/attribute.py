@@ -103,6 +103,7 @@ from .layout import (
     Prepared,
     best_row_per_class,
     finite_sse,
+    validation_sse,
 )
 from .noise_fit import noise_fit_numpy
 from .residuals import improvement_z, noise_floor_hf
@@ -244,7 +245,7 @@ def attribute(prep: Prepared, fit: dict) -> Attribution:
     y_val = np.asarray(prep.arrays.y_val)[:n_val]
     r_before = y_val - prep.w_val
     sse = finite_sse(fit)
-    best_rows = best_row_per_class(prep, sse)
+    best_rows = best_row_per_class(prep, sse, validation_sse(prep, fit))
     cands: dict[str, Candidate] = {}
     for effect in DETERMINISTIC_NAMES:
         if effect == "dead_zone" and prep.nominal.nl_kind == NL_PIECEWISE:

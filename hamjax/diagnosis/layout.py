@@ -426,7 +426,17 @@ def finite_sse(fits: dict) -> np.ndarray:
     return np.where(np.isfinite(fits["sse_est"]), fits["sse_est"], np.inf)
 
 
-def best_row_per_class(prep: Prepared, sse: np.ndarray) -> dict[str, int]:
+def validation_sse(prep: Prepared, fits: dict) -> np.ndarray:
+    """Each row's validation SSE (non-finite: infinite)."""
+    n = prep.n_val
+    r = np.asarray(fits["y_val"])[:, :n] - np.asarray(prep.arrays.y_val)[None, :n]
+    sse = np.sum(r**2, axis=1)
+    return np.where(np.isfinite(sse), sse, np.inf)
+
+
+def best_row_per_class(
+    prep: Prepared, sse: np.ndarray, val_sse: np.ndarray
+) -> dict[str, int]:
     """`{class name: its row with the lowest estimation SSE}` (first one on ties);
     the finishing stage and the attribution must agree on it.
 
@@ -434,8 +444,9 @@ def best_row_per_class(prep: Prepared, sse: np.ndarray) -> dict[str, int]:
     backlash) stands for the class only if it beats the class's best row without
     one by the nested likelihood ratio $(S_0 - S_1) / (S_1 / (n - p_1)) >
     2 \\ln(1 / \\alpha)$ ($\\chi^2_1$ under white noise; the bound of
-    `attribute._nested_lr` for one comparison): the extra slot must earn its place
-    on estimation data, as the effect must over the re-fit."""
+    `attribute._nested_lr` for one comparison), confirmed by a lower validation
+    SSE (`val_sse`; the ratio trusts white noise): the extra slot must earn its
+    place, as the effect must over the re-fit."""
     names = slot_names(N_MAX)
     extension = {e.name: [names.index(s) for s in e.extension] for e in DETERMINISTIC}
     best: dict[str, int] = {}
@@ -453,9 +464,9 @@ def best_row_per_class(prep: Prepared, sse: np.ndarray) -> dict[str, int]:
             continue
         p = int(np.sum(np.asarray(prep.rows[k][1].idx) < n_slots))
         s2 = sse[k] / max(prep.n_est - p, 1)
-        if s2 > 0 and (sse[best[name]] - sse[k]) / s2 > threshold:
-            best[name] = k
-        elif s2 == 0 and sse[k] < sse[best[name]]:
+        gain = sse[best[name]] - sse[k]
+        lr = gain / s2 if s2 > 0 else np.inf * np.sign(gain)
+        if lr > threshold and val_sse[k] < val_sse[best[name]]:
             best[name] = k
     return best
 

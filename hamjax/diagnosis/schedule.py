@@ -31,7 +31,7 @@ from .._results import RESULTS
 from ..simulation.sharding import effective_chunk
 from .augmented import Row, uses_feedback, uses_memory, uses_table
 from .fit import LAMBDA0, RowFit, fit_batch, theta_std
-from .layout import Prepared, best_row_per_class, finite_sse
+from .layout import Prepared, best_row_per_class, finite_sse, validation_sse
 
 
 REFIT = "parameter_mismatch"
@@ -89,7 +89,7 @@ def finishing_items(c: int, prep: Prepared, fits: dict) -> list[Item]:
       class doubled the cost.
     """
     sse = finite_sse(fits)
-    best = best_row_per_class(prep, sse)
+    best = best_row_per_class(prep, sse, validation_sse(prep, fits))
     i_pm = best.pop(REFIT)
     lead = sorted(best.values(), key=lambda k: sse[k])[:CONTINUE_CLASSES]
     used = np.asarray(prep.rows[i_pm][1].idx) < prep.arrays.anchor.shape[0]

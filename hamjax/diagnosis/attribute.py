@@ -101,10 +101,12 @@ import numpy as np
 from .augmented import EFFECT_SLOTS, NL_PIECEWISE, slot_names
 from .layout import (
     DETERMINISTIC,
+    LR_ALPHA,
     N_MAX,
     Prepared,
     best_row_per_class,
     finite_sse,
+    validation_sse,
 )
 from .noise_fit import noise_fit_numpy
 from .residuals import improvement_z, noise_floor_hf
@@ -112,7 +114,6 @@ from .residuals import improvement_z, noise_floor_hf
 
 Z_STAR = 3.5
 Z_STRUCT = 3.0  # structural vs re-fit: one comparison per case, t_19 at ~0.4 %
-LR_ALPHA = 1e-3  # level of the nested likelihood-ratio test (before Bonferroni)
 Z_CONFIRM = 2.0  # validation z that confirms a candidate the likelihood ratio picked
 RHO = 0.02
 SHRINK_EXPLAINED = 0.5
@@ -169,6 +170,10 @@ def _params(prep: Prepared, fit: dict, row: int, effect: str) -> dict:
         i = names.index(name)
         if free[i]:
             out[name] = {"value": float(phys[i]), "std": float(std_full[i])}
+    if effect == "backlash" and "slip_jump" not in out:
+        # a plain play operator: no slip jump (reported, so that a sticky-valve
+        # reading sees S and J side by side)
+        out["slip_jump"] = {"value": 0.0, "std": 0.0}
     if effect == "friction":
         used = {n for n in EFFECT_SLOT_NAMES[effect] if free[names.index(n)]}
         # which velocity the friction acts on: "output" (s = w) or "derivative"
@@ -243,7 +248,7 @@ def attribute(prep: Prepared, fit: dict) -> Attribution:
     y_val = np.asarray(prep.arrays.y_val)[:n_val]
     r_before = y_val - prep.w_val
     sse = finite_sse(fit)
-    best_rows = best_row_per_class(prep, sse)
+    best_rows = best_row_per_class(prep, sse, validation_sse(prep, fit))
     cands: dict[str, Candidate] = {}
     for effect in DETERMINISTIC_NAMES:
         if effect == "dead_zone" and prep.nominal.nl_kind == NL_PIECEWISE:

@@ -38,9 +38,10 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
+from ..models.nonlinearities.backlash import Backlash, BacklashState
 from ..models.nonlinearities.piecewise_linear import piecewise_linear_map
 from .effects._base import UNIT_MAX, StartContext, unit_raw
-from .effects.backlash import BacklashEffect, play_step
+from .effects.backlash import BacklashEffect, stick_slip_step
 from .effects.dead_zone import DeadZoneEffect, dead_zone
 from .effects.extra_pole import ExtraPoleEffect
 from .effects.feedback_nonlinearity import (
@@ -77,7 +78,9 @@ EFFECT_NEUTRAL = {
 # mapped smoothly into [0, 1) (the extra pole).
 _ABS_SLOTS = tuple(slot for effect in CHAIN for slot in effect.positive)
 _UNIT_SLOTS = tuple(slot for effect in CHAIN for slot in effect.unit_interval)
-NL_IDENTITY, NL_PIECEWISE, NL_TABULATED = 0, 1, 2
+NL_IDENTITY, NL_PIECEWISE, NL_TABULATED, NL_BACKLASH = 0, 1, 2, 3
+# the kinds whose map reads the tables (`tab_v`, `tab_u`, `tab_d`)
+TABLE_KINDS = (NL_TABULATED, NL_BACKLASH)
 
 
 def raw_from_physical(name: str, value: float) -> float:
@@ -112,7 +115,8 @@ class CaseArrays(eqx.Module):
     is_ct: Float[Array, ""]  # 1.0 for a continuous linear block
     nl_kind: Int[Array, ""]
     tab_v: Float[Array, " T"]
-    tab_u: Float[Array, " T"]
+    tab_u: Float[Array, " T"]  # the map, or a backlash's ascending border
+    tab_d: Float[Array, " T"]  # a backlash's descending border (else `tab_u`)
     b_disc: Float[Array, " n1"]  # discrete numerator, padded to n_max + 1
     ct_num: Float[Array, " n1"]  # continuous numerator x pad factor, monic den
     ct_pad: Float[Array, " n1"]  # the cancelling factor (s + lambda)^(n_max - n)
@@ -249,7 +253,8 @@ def static_map(
     case: CaseArrays,
     table: bool | Bool[Array, ""] = True,
 ) -> Array:
-    """The nominal static nonlinearity $F$ with re-fitted parameters.
+    """The nominal static nonlinearity $F$ with re-fitted parameters (the identity
+    for a backlash nominal, which runs in the input-memory scan: `memory_scan`).
 
     `table=False` skips the table look-up (exact unless the map is tabulated); a
     traced `table` that is the same for a whole batch skips it at run time.
@@ -377,29 +382,82 @@ def linear_part(
     return switch(feedback, loop, plain, u, z)
 
 
+class NominalBacklash(eqx.Module):
+    """A backlash nominal in the memory scan: borders tabulated on `case.tab_v`
+    (`tab_u` ascending, `tab_d` descending), read at `in_scale` times its input,
+    output times `out_scale`; `on` is False for every other kind (then ignored)."""
+
+    in_scale: Float[Array, ""]
+    out_scale: Float[Array, ""]
+    tab_v: Float[Array, " T"]
+    tab_u: Float[Array, " T"]
+    tab_d: Float[Array, " T"]
+    on: Bool[Array, ""]
+
+    def operator(self) -> Backlash:
+        return Backlash.from_table(self.tab_v, self.tab_u, self.tab_d)
+
+    def init(self, x0: Float[Array, ""]) -> tuple[Array, ...]:
+        """The operator's state at its first input (centred in the play), with
+        the border flags as floats (a scan carry with tangents)."""
+        return _float_state(self.operator().init(self.in_scale * x0))
+
+    def step(self, state: tuple[Array, ...], x: Float[Array, ""]):
+        """`Backlash.step` (seed 000's semantics) on `in_scale * x`."""
+        v_prev, u, on_a, on_d = state
+        bools = BacklashState(v_prev, u, on_a > 0.5, on_d > 0.5)
+        new, u = self.operator().step(bools, self.in_scale * x)
+        return _float_state(new), jnp.where(self.on, self.out_scale * u, x)
+
+
+def _float_state(state: BacklashState) -> tuple[Array, ...]:
+    v_prev, u, on_a, on_d = state
+    return v_prev, u, on_a.astype(u.dtype), on_d.astype(u.dtype)
+
+
 def memory_scan(
     v: Float[Array, " B"],
-    state: tuple[Array, Array],
+    state: tuple,
     max_step: Float[Array, ""],
     width: Float[Array, ""],
-) -> tuple[tuple[Array, Array], Float[Array, " B"]]:
-    """Rate limit then play operator from `state = (rate-limited, play output)`:
-    `(state_end, x)` (one scan, two clamps; chains over blocks like `filter_scan`)."""
+    jump: Float[Array, ""],
+    nominal: NominalBacklash,
+    table: bool | Bool[Array, ""] = True,
+) -> tuple[tuple, Float[Array, " B"]]:
+    """Rate limit, play operator with slip jump (`stick_slip_step`), then a
+    backlash nominal, from `state = (rate-limited, play output, nominal backlash
+    state)`: `(state_end, x)` (one scan; chains over blocks like `filter_scan`).
+    `table=False` skips the nominal backlash (exact unless the case has one)."""
 
-    def step(carry, vk):
-        xr, xb = carry
+    def step(carry, vk, with_nominal):
+        xr, xb, bl = carry
         xr = rate_limit_step(xr, vk, max_step)
-        xb = play_step(xb, xr, width)
-        return (xr, xb), xb
+        xb = stick_slip_step(xb, xr, width, jump)
+        if not with_nominal:
+            return (xr, xb, bl), xb
+        bl, x = nominal.step(bl, xb)
+        return (xr, xb, bl), x
 
-    return lax.scan(step, state, v, unroll=1)
+    def run(with_nominal):
+        return lambda v, state: lax.scan(
+            lambda c, vk: step(c, vk, with_nominal), state, v, unroll=1
+        )
+
+    return switch(table, run(True), run(False), v, state)
 
 
 def input_memory(
-    v: Float[Array, " L"], max_step: Float[Array, ""], width: Float[Array, ""]
+    v: Float[Array, " L"],
+    max_step: Float[Array, ""],
+    width: Float[Array, ""],
+    jump: Float[Array, ""],
+    nominal: NominalBacklash,
+    table: bool | Bool[Array, ""] = True,
 ) -> Float[Array, " L"]:
-    """Rate limit then play operator, both started at $v_0$."""
-    return memory_scan(v, (v[0], v[0]), max_step, width)[1]
+    """Rate limit, play (with slip jump) and a backlash nominal, all started at
+    $v_0$."""
+    state = (v[0], v[0], nominal.init(v[0]))
+    return memory_scan(v, state, max_step, width, jump, nominal, table)[1]
 
 
 def named(p: Float[Array, " S"], case: CaseArrays) -> Callable[[str], Array]:
@@ -418,10 +476,19 @@ def filter_coefficients(p: Float[Array, " S"], case: CaseArrays) -> tuple[Array,
     return b, a
 
 
-def memory_arguments(p: Float[Array, " S"], case: CaseArrays) -> tuple[Array, Array]:
-    """`(max_step, width)` of the input-memory scan (rate limit per sample, play)."""
+def memory_arguments(p: Float[Array, " S"], case: CaseArrays) -> tuple:
+    """`(max_step, width, jump, nominal)` of the input-memory scan (rate limit per
+    sample, play with its slip jump, the nominal backlash)."""
     at = named(p, case)
-    return at("rate") * case.dt, at("backlash")
+    nominal = NominalBacklash(
+        at("in_scale"),
+        at("out_scale"),
+        case.tab_v,
+        case.tab_u,
+        case.tab_d,
+        case.nl_kind == NL_BACKLASH,
+    )
+    return at("rate") * case.dt, at("backlash"), at("slip_jump"), nominal
 
 
 def static_part(
@@ -452,8 +519,9 @@ def simulate_augmented(
 ) -> Float[Array, " L"]:
     """Output of the augmented model at physical parameters `p`, from rest.
 
-    `memory=False` skips the input-memory scan (rate limit and backlash), which is
-    exact when both are at their neutral values; a traced `memory` that is the same
+    `memory=False` skips the input-memory scan (rate limit, backlash and a
+    backlash nominal), which is exact when the first two are at their neutral
+    values and the map is not a backlash; a traced `memory` that is the same
     for a whole batch (not mapped over) skips it at run time for that batch.
     `feedback=False` likewise runs the plain filter instead of the feedback loop
     (exact when `friction` and `feedback_nonlinearity` are neutral).
@@ -476,7 +544,8 @@ def simulate_with_filter(
     """`simulate_augmented` with the filter `(b, a) = filter_coefficients(p, case)`
     already at hand (a fit has it; the matrix exponential is not repeated)."""
     v = delay(v, tau)
-    x = switch(memory, input_memory, lambda v, *_: v, v, *memory_arguments(p, case))
+    args = (*memory_arguments(p, case), table)
+    x = switch(memory, input_memory, lambda v, *_: v, v, *args)
     rest = jnp.zeros(a.shape[0] - 1, v.dtype)
     _, w = linear_part(b, a, static_part(x, p, case, table), rest, p, case, feedback)
     return output_part(w, p, case)
@@ -495,12 +564,22 @@ def simulate_row(
     return simulate_augmented(p, row.tau, v, case, memory, feedback)
 
 
-def uses_memory(free: Bool[Array, "*batch S"]) -> Bool[Array, "*batch"]:
-    """Whether rows with these free slots need the input-memory scan."""
+MEMORY_SLOTS = RateLimitEffect.slots + BacklashEffect.slots
+
+
+def uses_memory(
+    free: Bool[Array, "*batch S"], nl_kind: Int[Array, "*batch"] | int = NL_IDENTITY
+) -> Bool[Array, "*batch"]:
+    """Whether rows with these free slots, of cases of map kind `nl_kind`, need the
+    input-memory scan (every row of a backlash nominal does)."""
     n_max = free.shape[-1] - len(NOMINAL_SLOTS) - len(EFFECT_SLOTS)
-    return (
-        free[..., slot_index("rate", n_max)] | free[..., slot_index("backlash", n_max)]
-    )
+    cols = [slot_index(name, n_max) for name in MEMORY_SLOTS]
+    return free[..., cols].any(axis=-1) | (nl_kind == NL_BACKLASH)
+
+
+def uses_table(nl_kind: Int[Array, "*batch"]) -> Bool[Array, "*batch"]:
+    """Whether cases of these map kinds read the tables (`TABLE_KINDS`)."""
+    return (nl_kind == NL_TABULATED) | (nl_kind == NL_BACKLASH)
 
 
 FEEDBACK_SLOTS = FrictionEffect.slots + FeedbackNonlinearityEffect.slots

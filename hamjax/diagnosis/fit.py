@@ -17,7 +17,6 @@ from .._linalg import cholesky_solve
 from .._results import RESULTS
 from .augmented import (
     EFFECT_SLOTS,
-    NL_TABULATED,
     NOMINAL_SLOTS,
     CaseArrays,
     Row,
@@ -32,6 +31,7 @@ from .augmented import (
     switch,
     uses_feedback,
     uses_memory,
+    uses_table,
 )
 from .effects.time_delay import delay
 
@@ -68,15 +68,16 @@ def nominal_mask(row: Row, case: CaseArrays) -> Bool[Array, " P"]:
 
 def _block_model(p, b, a, state, vb, case, memory, table, feedback):
     """One block of the estimation record through the augmented model, from the
-    scans' `state = (rate-limited input, play output, filter state)`
-    (`augmented.linear_part`: the feedback loop or the plain filter)."""
-    xr, xb, z = state
+    scans' `state = (rate-limited input, play output, nominal backlash state,
+    filter state)` (`augmented.memory_scan`; `augmented.linear_part`: the
+    feedback loop or the plain filter)."""
+    xr, xb, bl, z = state
     skip = lambda v, s, *_: (s, v)  # noqa: E731
-    args = (vb, (xr, xb), *memory_arguments(p, case))
-    (xr, xb), x = switch(memory, memory_scan, skip, *args)
+    args = (vb, (xr, xb, bl), *memory_arguments(p, case), table)
+    (xr, xb, bl), x = switch(memory, memory_scan, skip, *args)
     u = static_part(x, p, case, table)
     z, w = linear_part(b, a, u, z, p, case, feedback)
-    return (xr, xb, z), output_part(w, p, case)
+    return (xr, xb, bl, z), output_part(w, p, case)
 
 
 def _coefficients(theta, row, case):
@@ -124,7 +125,14 @@ def _normal_equations(theta, row, case, flags):
         lambda t: jax.jvp(lambda th: _coefficients(th, row, case), (theta,), (t,)),
         out_axes=(None, 0),
     )(basis)
-    state0 = (vd[0], vd[0], jnp.zeros(a.shape[0] - 1, theta.dtype))
+    # the nominal backlash starts centred in its play at vd[0] (its in_scale's
+    # tangents with it); the other scans from vd[0] and rest
+    init = lambda p: memory_arguments(p, case)[-1].init(vd[0])  # noqa: E731
+    bl0, dbl0 = jax.vmap(lambda t: jax.jvp(init, (p,), (t,)), out_axes=(None, 0))(dp)
+    filt0 = jnp.zeros(a.shape[0] - 1, theta.dtype)
+    state0 = (vd[0], vd[0], bl0, filt0)
+    zeros = lambda x: jnp.zeros((P, *x.shape), x.dtype)  # noqa: E731
+    dstate0 = (zeros(vd[0]), zeros(vd[0]), dbl0, zeros(filt0))
 
     def body(carry):
         k, state, dstate, sse, H, g = carry
@@ -145,7 +153,7 @@ def _normal_equations(theta, row, case, flags):
     carry = (
         jnp.asarray(0, jnp.int32),
         state0,
-        jax.tree.map(lambda x: jnp.zeros((P, *x.shape), x.dtype), state0),
+        dstate0,
         jnp.zeros((), theta.dtype),
         jnp.zeros((P, P), theta.dtype),
         jnp.zeros(P, theta.dtype),
@@ -240,8 +248,9 @@ def fit_row(
 ) -> RowFit:
     """Fit one row from `row.theta0` (the nominal slots start at nominal).
     `memory`, `table`, `feedback`: as in `simulate_augmented` and `static_map`
-    (False only if the row frees neither the rate limit nor the backlash, if the
-    case's map is not tabulated, and if the row frees no feedback slot)."""
+    (False only if the row frees neither the rate limit nor the backlash and the
+    case's map is not a backlash, if the map reads no table (`uses_table`), and if
+    the row frees no feedback slot)."""
     theta, sse, jtj, (p, b, a), done, lam, k = levenberg_marquardt(
         row.theta0, lam0, (row, case, memory, table, feedback), max_steps
     )
@@ -310,9 +319,9 @@ def _fit_flat(
     # that most batches are alike. `feedback` likewise: a batch in which no row
     # frees a `friction` or `feedback_nonlinearity` slot runs the plain filter.
     if memory is None:
-        memory = jnp.any(uses_memory(rows.free))
+        memory = jnp.any(uses_memory(rows.free, cases.nl_kind))
     if table is None:
-        table = jnp.any(cases.nl_kind == NL_TABULATED)
+        table = jnp.any(uses_table(cases.nl_kind))
     if feedback is None:
         feedback = jnp.any(uses_feedback(rows.free))
     fit = lambda r, c, k, lam: fit_row(r, c, k, lam, memory, table, feedback)  # noqa: E731

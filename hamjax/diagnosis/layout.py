@@ -7,6 +7,7 @@ import numpy as np
 import scipy.linalg
 
 from ..models import (
+    Backlash,
     ContinuousTransferFunction,
     DiscreteTransferFunction,
     Hammerstein,
@@ -14,10 +15,12 @@ from ..models import (
     PiecewiseLinear,
     Tabulated,
 )
+from ..models.hammerstein import fold_output_scale
 from ..models.nonlinearities.piecewise_linear import piecewise_linear_map
 from .augmented import (
     EFFECT_NEUTRAL,
     EFFECT_SLOTS,
+    NL_BACKLASH,
     NL_IDENTITY,
     NL_PIECEWISE,
     NL_TABULATED,
@@ -69,6 +72,7 @@ QUANTILES = (0.02, 0.05, 0.1, 0.2, 0.3, 0.5, 0.7, 0.8, 0.9, 0.95, 0.98)
 # magnitude (slopes, gain, scales, denominator coefficients) or by half of it times
 # the input range (breakpoints and levels of a piecewise-linear map).
 RELATIVE_STEP = 0.1
+LR_ALPHA = 1e-3  # level of the nested likelihood-ratio tests (before Bonferroni)
 PRIOR_FLOOR = 1e-6  # the prior's weight without a stated uncertainty (a tie-break)
 NOMINAL_UNCERTAINTY = 0.2  # default relative std of the nominal parameters
 
@@ -110,22 +114,57 @@ class Nominal:
     nl_kind: int
     pl: np.ndarray  # k1 k2 d1 d2 l1 l2
     tab_v: np.ndarray
-    tab_u: np.ndarray
+    tab_u: np.ndarray  # the map, or a backlash's ascending border
+    tab_d: np.ndarray  # a backlash's descending border (else `tab_u`)
     is_ct: bool
     b: np.ndarray  # discrete numerator / continuous numerator (highest power first)
     den: np.ndarray  # discrete a (a[0] = 1) / continuous den (highest power first)
     order: int
 
 
+def _tables(nl, tab_v: np.ndarray, tab_u: np.ndarray, tab_d: np.ndarray | None):
+    if tab_v.shape[0] > T_MAX:
+        raise ValueError(
+            f"{type(nl).__name__} map has {tab_v.shape[0]} points (at most {T_MAX})"
+        )
+    return tab_v, tab_u, tab_u if tab_d is None else tab_d
+
+
+def _backlash_tables(nl: Backlash):
+    """The borders of a backlash tabulated on one grid, centred in the play at
+    the start (the `model.json` form and convention), else `ValueError`."""
+    asc, desc = nl.ascending, nl.descending
+    if not (
+        isinstance(asc, Tabulated)
+        and isinstance(desc, Tabulated)
+        and np.array_equal(np.asarray(asc.v), np.asarray(desc.v))
+    ):
+        raise ValueError(
+            "a backlash nominal needs both borders tabulated on one grid (the "
+            "model.json form)"
+        )
+    if nl.u0 is not None:
+        raise ValueError(
+            "a backlash nominal starts centred in its play (u0 = None, the "
+            "model.json convention)"
+        )
+    grid = np.asarray(asc.v, float)
+    return _tables(nl, grid, np.asarray(asc.u, float), np.asarray(desc.u, float))
+
+
 def describe_nominal(plant: Hammerstein) -> Nominal:
-    """Read the parameters the diagnosis may re-fit off a nominal plant.
+    """Read the parameters the diagnosis may re-fit off a nominal plant (a
+    backlash nominal's output scale folded into its linear block first:
+    `fold_output_scale`).
 
     **Raises:** `ValueError` for a nonlinearity or linear block outside the
     `model.json` kinds handled by the diagnosis, or an order above `N_MAX`.
     """
+    plant = fold_output_scale(plant)
     nl, lin = plant.nonlinearity, plant.linear
     pl = np.array([1.0, 1.0, 0.0, 0.0, 0.0, 0.0])
     tab_v, tab_u = np.array([-1.0, 1.0]), np.array([-1.0, 1.0])
+    tab_d = tab_u
     if isinstance(nl, Identity):
         kind = NL_IDENTITY
     elif isinstance(nl, PiecewiseLinear):
@@ -135,15 +174,16 @@ def describe_nominal(plant: Hammerstein) -> Nominal:
         )
     elif isinstance(nl, Tabulated):
         kind = NL_TABULATED
-        tab_v, tab_u = np.asarray(nl.v, float), np.asarray(nl.u, float)
-        if tab_v.shape[0] > T_MAX:
-            raise ValueError(
-                f"tabulated map has {tab_v.shape[0]} points (at most {T_MAX})"
-            )
+        tab_v, tab_u, tab_d = _tables(
+            nl, np.asarray(nl.v, float), np.asarray(nl.u, float), None
+        )
+    elif isinstance(nl, Backlash):
+        kind = NL_BACKLASH
+        tab_v, tab_u, tab_d = _backlash_tables(nl)
     else:
         raise ValueError(
-            f"the diagnosis handles identity, piecewise_linear and tabulated maps; got "
-            f"{type(nl).__name__} (a backlash nominal is not supported yet)"
+            "the diagnosis handles identity, piecewise_linear, tabulated and "
+            f"backlash maps; got {type(nl).__name__}"
         )
     if isinstance(lin, DiscreteTransferFunction):
         b, den, ct = np.asarray(lin.b, float), np.asarray(lin.a, float), False
@@ -159,15 +199,17 @@ def describe_nominal(plant: Hammerstein) -> Nominal:
         )
     if order < 1:
         raise ValueError("the linear block must have at least one pole")
-    return Nominal(kind, pl, tab_v, tab_u, ct, b, den, order)
+    return Nominal(kind, pl, tab_v, tab_u, tab_d, ct, b, den, order)
 
 
-def _pad_table(v: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _pad_table(v: np.ndarray, *us: np.ndarray) -> tuple[np.ndarray, ...]:
+    """`v` and each table `us` padded to `T_MAX` points (constant beyond `v[-1]`,
+    as `np.interp` extrapolates)."""
     extra = T_MAX - v.shape[0]
     step = max(abs(v[-1]) + abs(v[0]), 1.0) * 1e6
     return (
         np.concatenate([v, v[-1] + step * np.arange(1, extra + 1)]),
-        np.concatenate([u, np.full(extra, u[-1])]),
+        *(np.concatenate([u, np.full(extra, u[-1])]) for u in us),
     )
 
 
@@ -232,6 +274,7 @@ def prepare(
 
     `nominal_uncertainty`: the relative std of the nominal parameters, the prior
     of every re-fit (`prior_weight`); None for a negligible prior."""
+    plant = fold_output_scale(plant)
     nom = describe_nominal(plant)
     n_est, n_val = est["v"].shape[0], val["v"].shape[0]
     L = length or bucket(max(n_est, n_val))
@@ -293,7 +336,7 @@ def prepare(
     refit = [f"den{j + 1}" for j in den_free]
     if nom.nl_kind == NL_PIECEWISE:
         refit += ["k1", "k2", "d1", "d2", "l1", "l2"]
-    elif nom.nl_kind == NL_TABULATED:
+    elif nom.nl_kind in (NL_TABULATED, NL_BACKLASH):
         refit += ["in_scale", "out_scale"]
     else:
         # With a piecewise-linear or tabulated map the static gain is not a
@@ -306,6 +349,7 @@ def prepare(
     sign_slots = {
         NL_PIECEWISE: ("k1", "k2", "l1", "l2"),
         NL_TABULATED: ("out_scale",),
+        NL_BACKLASH: ("out_scale",),
     }.get(nom.nl_kind, ("gain",))
     taus_tried = _delay_shortlist(est["y"], w_est)
     rows = []
@@ -341,7 +385,7 @@ def prepare(
                         ),
                     )
                 )
-    tab_v, tab_u = _pad_table(nom.tab_v, nom.tab_u)
+    tab_v, tab_u, tab_d = _pad_table(nom.tab_v, nom.tab_u, nom.tab_d)
     v_est, m_est = _pad_record(est["v"], L)
     y_est, _ = _pad_record(est["y"], L)
     v_val, m_val = _pad_record(val["v"], L)
@@ -362,6 +406,7 @@ def prepare(
         nl_kind=np.asarray(nom.nl_kind),
         tab_v=f(tab_v),
         tab_u=f(tab_u),
+        tab_d=f(tab_d),
         b_disc=f(b_disc),
         ct_num=f(ct_num),
         ct_pad=f(ct_pad),
@@ -384,12 +429,47 @@ def finite_sse(fits: dict) -> np.ndarray:
     return np.where(np.isfinite(fits["sse_est"]), fits["sse_est"], np.inf)
 
 
-def best_row_per_class(prep: Prepared, sse: np.ndarray) -> dict[str, int]:
+def validation_sse(prep: Prepared, fits: dict) -> np.ndarray:
+    """Each row's validation SSE (non-finite: infinite)."""
+    n = prep.n_val
+    r = np.asarray(fits["y_val"])[:, :n] - np.asarray(prep.arrays.y_val)[None, :n]
+    sse = np.sum(r**2, axis=1)
+    return np.where(np.isfinite(sse), sse, np.inf)
+
+
+def best_row_per_class(
+    prep: Prepared, sse: np.ndarray, val_sse: np.ndarray
+) -> dict[str, int]:
     """`{class name: its row with the lowest estimation SSE}` (first one on ties);
-    the finishing stage and the attribution must agree on it."""
+    the finishing stage and the attribution must agree on it.
+
+    A row that frees an `extension` slot of its effect (the slip jump of a
+    backlash) stands for the class only if it beats the class's best row without
+    one by the nested likelihood ratio $(S_0 - S_1) / (S_1 / (n - p_1)) >
+    2 \\ln(1 / \\alpha)$ ($\\chi^2_1$ under white noise; the bound of
+    `attribute._nested_lr` for one comparison), confirmed by a lower validation
+    SSE (`val_sse`; the ratio trusts white noise): the extra slot must earn its
+    place, as the effect must over the re-fit."""
+    names = slot_names(N_MAX)
+    extension = {e.name: [names.index(s) for s in e.extension] for e in DETERMINISTIC}
     best: dict[str, int] = {}
-    for k, (name, _) in enumerate(prep.rows):
-        if name not in best or sse[k] < sse[best[name]]:
+    best_ext: dict[str, int] = {}
+    for k, (name, row) in enumerate(prep.rows):
+        cols = extension.get(name, [])
+        table = best_ext if any(row.free[i] for i in cols) else best
+        if name not in table or sse[k] < sse[table[name]]:
+            table[name] = k
+    threshold = 2.0 * np.log(1.0 / LR_ALPHA)
+    n_slots = prep.arrays.anchor.shape[0]
+    for name, k in best_ext.items():
+        if name not in best:
+            best[name] = k
+            continue
+        p = int(np.sum(np.asarray(prep.rows[k][1].idx) < n_slots))
+        s2 = sse[k] / max(prep.n_est - p, 1)
+        gain = sse[best[name]] - sse[k]
+        lr = gain / s2 if s2 > 0 else np.inf * np.sign(gain)
+        if lr > threshold and val_sse[k] < val_sse[best[name]]:
             best[name] = k
     return best
 
@@ -398,7 +478,7 @@ def n_free_parameters(plant: Hammerstein) -> int:
     """Width of the compact parameter vector this plant's rows need."""
     nom = describe_nominal(plant)
     n_den = nom.order if nom.is_ct else nom.den.shape[0] - 1
-    nl = {NL_PIECEWISE: 6, NL_TABULATED: 2}.get(nom.nl_kind, 1)  # 1: the gain
+    nl = {NL_PIECEWISE: 6, NL_TABULATED: 2, NL_BACKLASH: 2}.get(nom.nl_kind, 1)
     return n_den + nl + MAX_EFFECT_SLOTS
 
 
@@ -480,9 +560,32 @@ def _static_numpy(nom: Nominal, v: np.ndarray) -> np.ndarray:
         return piecewise_linear_map(v, *nom.pl, xp=np)
     if nom.nl_kind == NL_TABULATED:
         return np.interp(v, nom.tab_v, nom.tab_u)
+    if nom.nl_kind == NL_BACKLASH:
+        return _backlash_numpy(nom, np.asarray(v, float))
     return np.asarray(v, float)
+
+
+def _backlash_numpy(nom: Nominal, v: np.ndarray) -> np.ndarray:
+    """`Backlash.step` over `v` from its default start (centred in the play at
+    `v[0]`), on Python floats (no compilation per record length)."""
+    grid, fa_all, fd_all = nom.tab_v, nom.tab_u, nom.tab_d
+    fa, fd = np.interp(v, grid, fa_all).tolist(), np.interp(v, grid, fd_all).tolist()
+    v = v.tolist()
+    u = (fa[0] + fd[0]) / 2
+    on_a, on_d, v_prev = u == fa[0], u == fd[0], v[0]
+    out = np.empty(len(v))
+    for k, vk in enumerate(v):
+        rising, falling = vk > v_prev, vk < v_prev
+        take_a = rising and (on_a or fa[k] >= u)
+        take_d = falling and (on_d or fd[k] <= u)
+        u = fa[k] if take_a else fd[k] if take_d else u
+        if rising or falling:
+            on_a, on_d = take_a or u == fa[k], take_d or u == fd[k]
+        v_prev, out[k] = vk, u
+    return out
 
 
 def nominal_output(plant: Hammerstein, v: np.ndarray, dt: float) -> np.ndarray:
     """The nominal plant's output from rest for the input samples `v` (NumPy)."""
+    plant = fold_output_scale(plant)
     return _response_numpy(plant.linear, _static_numpy(describe_nominal(plant), v), dt)

@@ -29,9 +29,9 @@ import numpy as np
 
 from .._results import RESULTS
 from ..simulation.sharding import effective_chunk
-from .augmented import NL_TABULATED, Row, uses_feedback, uses_memory
+from .augmented import Row, uses_feedback, uses_memory, uses_table
 from .fit import LAMBDA0, RowFit, fit_batch, theta_std
-from .layout import Prepared, best_row_per_class, finite_sse
+from .layout import Prepared, best_row_per_class, finite_sse, validation_sse
 
 
 REFIT = "parameter_mismatch"
@@ -89,7 +89,7 @@ def finishing_items(c: int, prep: Prepared, fits: dict) -> list[Item]:
       class doubled the cost.
     """
     sse = finite_sse(fits)
-    best = best_row_per_class(prep, sse)
+    best = best_row_per_class(prep, sse, validation_sse(prep, fits))
     i_pm = best.pop(REFIT)
     lead = sorted(best.values(), key=lambda k: sse[k])[:CONTINUE_CLASSES]
     used = np.asarray(prep.rows[i_pm][1].idx) < prep.arrays.anchor.shape[0]
@@ -158,7 +158,10 @@ def run_queue(
     # and those that need the feedback loop (friction, feedback nonlinearity) last,
     # together: the batches (per device) left without any skip that scan, or that
     # loop (`fit._fit_flat`).
-    memory = [np.asarray(uses_memory(r.free)) for r in rows]
+    memory = [
+        np.asarray(uses_memory(r.free, p.nominal.nl_kind))
+        for r, p in zip(rows, preps, strict=True)
+    ]
     feedback = [np.asarray(uses_feedback(r.free)) for r in rows]
     order = sorted(  # stable: otherwise in case order
         ((c, k) for c, m in enumerate(memory) for k in range(m.shape[0])),
@@ -172,7 +175,7 @@ def run_queue(
     # smaller compiled program); None: decided per batch at run time. A call of
     # one screening batch gains nothing from skipping the memory scan or the
     # feedback loop at run time.
-    tabulated = {p.nominal.nl_kind == NL_TABULATED for p in preps}
+    tabulated = {bool(uses_table(p.nominal.nl_kind)) for p in preps}
     one = len(order) <= batch
     flags = {
         "memory": True if one else None,

@@ -13,12 +13,12 @@ from ..models import (
     DiscreteTransferFunction,
     Hammerstein,
     Identity,
-    OutputScaled,
     PiecewiseLinear,
     Scaled,
     Shifted,
     Tabulated,
 )
+from ..models.hammerstein import fold_output_scale
 from .files import read_json
 
 
@@ -213,9 +213,7 @@ def model_to_dict(plant: Hammerstein, dt: float | None = None, *, grid=None) -> 
     $G(0) < 0$) has no form of its own in the contract: it is written as the
     unscaled backlash before $kG$, the same plant from input to output.
     """
-    if isinstance(plant.nonlinearity, OutputScaled):
-        k = plant.nonlinearity.gain
-        plant = Hammerstein(plant.nonlinearity.inner, plant.linear.scaled(k))
+    plant = fold_output_scale(plant)
     nl = plant.nonlinearity
     if isinstance(nl, Backlash):
         asc, desc = nl.ascending, nl.descending

@@ -53,6 +53,17 @@ def scale_nonlinearity(
     raise TypeError(f"cannot scale a {type(nonlinearity).__name__}")
 
 
+def fold_output_scale(plant: Hammerstein) -> Hammerstein:
+    """A hysteresis operator with its output scaled by $k$ (`OutputScaled`, seed
+    000's $kF$ for $G(0) < 0$) as the unscaled operator before $kG$: the same
+    plant from input to output (the form `model.json` writes and the diagnosis
+    re-fits)."""
+    nl = plant.nonlinearity
+    if isinstance(nl, OutputScaled):
+        return Hammerstein(nl.inner, plant.linear.scaled(nl.gain))
+    return plant
+
+
 def normalise_static_gain(plant: Hammerstein) -> Hammerstein:
     """The seed-000 normalisation $(kF, G/k)$ with $k = G(0)$, so that $G(0) = 1$.
 

@@ -122,6 +122,18 @@ PLANTS = [
     hj.Hammerstein(
         hj.Identity(), hj.ContinuousTransferFunction([1.0, 3.0], [1.0, 1.5, 2.0, 1.0])
     ),
+    # a backlash nominal (the model.json form: borders tabulated on one grid),
+    # curved and of unequal width, so that neither border is a shift of the other
+    hj.Hammerstein(
+        hj.Backlash.from_table(
+            np.linspace(-1.2, 1.2, 9),
+            0.8 * np.linspace(-1.2, 1.2, 9)
+            - 0.15
+            + 0.1 * np.linspace(-1.2, 1.2, 9) ** 2,
+            0.9 * np.linspace(-1.2, 1.2, 9) + 0.2,
+        ),
+        hj.DiscreteTransferFunction([0.0, 0.3], [1.0, -0.7], 0.05),
+    ),
 ]
 
 
@@ -232,7 +244,8 @@ def test_blocked_normal_equations_equal_the_full_record_jacobian(plant, getkey):
     est["y"] = np.asarray(jr.normal(getkey(), (300,)))
     prep = prepare(plant, 0.05, est, val, length=1024)
     A = prep.arrays
-    tabulated = isinstance(plant.nonlinearity, hj.Tabulated)
+    tabulated = isinstance(plant.nonlinearity, hj.Tabulated | hj.Backlash)
+    kind = prep.nominal.nl_kind
     # flags as arrays: one compilation serves the run-time skips and the full model
     blocked = jax.jit(normal_equations)
 
@@ -250,7 +263,11 @@ def test_blocked_normal_equations_equal_the_full_record_jacobian(plant, getkey):
         ref = reference(theta, row)
         # skipping the memory scan, the table or the feedback loop is exact where
         # they are unused
-        used = (uses_memory(row.free), jnp.asarray(tabulated), uses_feedback(row.free))
+        used = (
+            uses_memory(row.free, kind),
+            jnp.asarray(tabulated),
+            uses_feedback(row.free),
+        )
         for flags in ((on, on, on), used):
             for got, want in zip(blocked(theta, row, A, *flags), ref, strict=True):
                 scale = float(jnp.max(jnp.abs(want)))

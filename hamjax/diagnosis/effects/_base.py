@@ -51,6 +51,10 @@ class AbstractEffect(eqx.Module):
     neutral: ClassVar[dict[str, float]] = {}
     positive: ClassVar[tuple[str, ...]] = ()
     unit_interval: ClassVar[tuple[str, ...]] = ()
+    # slots that extend the effect's simpler form (neutral there): a row freeing
+    # one stands for the class only if the likelihood ratio over the class's best
+    # simpler row is significant (`layout.best_row_per_class`)
+    extension: ClassVar[tuple[str, ...]] = ()
     deterministic: ClassVar[bool] = True
 
     def scales(self, ctx: StartContext) -> dict[str, float]:

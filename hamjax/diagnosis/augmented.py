@@ -247,27 +247,6 @@ def _table(v: Array, p: Float[Array, " S"], case: CaseArrays) -> Array:
     return so * jnp.interp(si * v, case.tab_v, case.tab_u)
 
 
-def static_map(
-    v: Array,
-    p: Float[Array, " S"],
-    case: CaseArrays,
-    table: bool | Bool[Array, ""] = True,
-) -> Array:
-    """The nominal static nonlinearity $F$ with re-fitted parameters (the identity
-    for a backlash nominal, which runs in the input-memory scan: `memory_scan`).
-
-    `table=False` skips the table look-up (exact unless the map is tabulated); a
-    traced `table` that is the same for a whole batch skips it at run time.
-    """
-    pl = piecewise_linear_map(v, *(p[i] for i in range(6)))
-    tab = switch(table, _table, lambda v, *_: jnp.zeros_like(v), v, p, case)
-    return jnp.where(
-        case.nl_kind == NL_PIECEWISE,
-        pl,
-        jnp.where(case.nl_kind == NL_TABULATED, tab, v),
-    )
-
-
 def filter_scan(
     b: Array, a: Array, u: Float[Array, " B"], z: Float[Array, " n"]
 ) -> tuple[Float[Array, " n"], Float[Array, " B"]]:
@@ -418,16 +397,16 @@ def _float_state(state: BacklashState) -> tuple[Array, ...]:
 def memory_scan(
     v: Float[Array, " B"],
     state: tuple,
-    max_step: Float[Array, ""],
-    width: Float[Array, ""],
-    jump: Float[Array, ""],
-    nominal: NominalBacklash,
+    p: Float[Array, " S"],
+    case: CaseArrays,
     table: bool | Bool[Array, ""] = True,
 ) -> tuple[tuple, Float[Array, " B"]]:
     """Rate limit, play operator with slip jump (`stick_slip_step`), then a
-    backlash nominal, from `state = (rate-limited, play output, nominal backlash
-    state)`: `(state_end, x)` (one scan; chains over blocks like `filter_scan`).
-    `table=False` skips the nominal backlash (exact unless the case has one)."""
+    backlash nominal, at parameters `p` (`memory_arguments`), from `state =
+    (rate-limited, play output, nominal backlash state)`: `(state_end, x)` (one
+    scan; chains over blocks like `filter_scan`). `table=False` skips the nominal
+    backlash (exact unless the case has one)."""
+    max_step, width, jump, nominal = memory_arguments(p, case)
 
     def step(carry, vk, with_nominal):
         xr, xb, bl = carry
@@ -448,16 +427,14 @@ def memory_scan(
 
 def input_memory(
     v: Float[Array, " L"],
-    max_step: Float[Array, ""],
-    width: Float[Array, ""],
-    jump: Float[Array, ""],
-    nominal: NominalBacklash,
+    p: Float[Array, " S"],
+    case: CaseArrays,
     table: bool | Bool[Array, ""] = True,
 ) -> Float[Array, " L"]:
     """Rate limit, play (with slip jump) and a backlash nominal, all started at
     $v_0$."""
-    state = (v[0], v[0], nominal.init(v[0]))
-    return memory_scan(v, state, max_step, width, jump, nominal, table)[1]
+    state = (v[0], v[0], memory_arguments(p, case)[-1].init(v[0]))
+    return memory_scan(v, state, p, case, table)[1]
 
 
 def named(p: Float[Array, " S"], case: CaseArrays) -> Callable[[str], Array]:
@@ -497,10 +474,23 @@ def static_part(
     case: CaseArrays,
     table: bool | Bool[Array, ""] = True,
 ) -> Array:
-    """Dead zone, $F$, preload and saturation: the memoryless input side."""
+    """Dead zone, $F$, preload and saturation: the memoryless input side.
+
+    $F$ is the nominal static map with re-fitted parameters (the identity for a
+    backlash nominal, which runs in the input-memory scan: `memory_scan`);
+    `table=False` skips the table look-up (exact unless the map is tabulated); a
+    traced `table` that is the same for a whole batch skips it at run time.
+    """
     at = named(p, case)
     vd = dead_zone(x, at("dz_lo"), at("dz_hi"))
-    u = add_preload(static_map(vd, p, case, table), vd, at("preload"))
+    pl = piecewise_linear_map(vd, *(p[i] for i in range(6)))
+    tab = switch(table, _table, lambda v, *_: jnp.zeros_like(v), vd, p, case)
+    f = jnp.where(
+        case.nl_kind == NL_PIECEWISE,
+        pl,
+        jnp.where(case.nl_kind == NL_TABULATED, tab, vd),
+    )
+    u = add_preload(f, vd, at("preload"))
     return saturate(u, at("sat_lo"), at("sat_hi"))
 
 
@@ -544,24 +534,17 @@ def simulate_with_filter(
     """`simulate_augmented` with the filter `(b, a) = filter_coefficients(p, case)`
     already at hand (a fit has it; the matrix exponential is not repeated)."""
     v = delay(v, tau)
-    args = (*memory_arguments(p, case), table)
-    x = switch(memory, input_memory, lambda v, *_: v, v, *args)
+    x = switch(memory, input_memory, lambda v, *_: v, v, p, case, table)
     rest = jnp.zeros(a.shape[0] - 1, v.dtype)
     _, w = linear_part(b, a, static_part(x, p, case, table), rest, p, case, feedback)
     return output_part(w, p, case)
 
 
 def simulate_row(
-    theta: Float[Array, " P"],
-    row: Row,
-    v: Float[Array, " L"],
-    case: CaseArrays,
-    memory: bool | Bool[Array, ""] = True,
-    feedback: bool | Bool[Array, ""] = True,
+    theta: Float[Array, " P"], row: Row, v: Float[Array, " L"], case: CaseArrays
 ) -> Float[Array, " L"]:
-    """`simulate_augmented` at a row's compact parameters."""
-    p = full_parameters(theta, row, case)
-    return simulate_augmented(p, row.tau, v, case, memory, feedback)
+    """`simulate_augmented` at a row's compact parameters (every scan run)."""
+    return simulate_augmented(full_parameters(theta, row, case), row.tau, v, case)
 
 
 MEMORY_SLOTS = RateLimitEffect.slots + BacklashEffect.slots

@@ -73,7 +73,7 @@ def _block_model(p, b, a, state, vb, case, memory, table, feedback):
     feedback loop or the plain filter)."""
     xr, xb, bl, z = state
     skip = lambda v, s, *_: (s, v)  # noqa: E731
-    args = (vb, (xr, xb, bl), *memory_arguments(p, case), table)
+    args = (vb, (xr, xb, bl), p, case, table)
     (xr, xb, bl), x = switch(memory, memory_scan, skip, *args)
     u = static_part(x, p, case, table)
     z, w = linear_part(b, a, u, z, p, case, feedback)
@@ -247,7 +247,7 @@ def fit_row(
     feedback: bool | Bool[Array, ""] = True,
 ) -> RowFit:
     """Fit one row from `row.theta0` (the nominal slots start at nominal).
-    `memory`, `table`, `feedback`: as in `simulate_augmented` and `static_map`
+    `memory`, `table`, `feedback`: as in `simulate_augmented` and `static_part`
     (False only if the row frees neither the rate limit nor the backlash and the
     case's map is not a backlash, if the map reads no table (`uses_table`), and if
     the row frees no feedback slot)."""

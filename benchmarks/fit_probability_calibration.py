@@ -40,6 +40,11 @@ def _pair(text: str) -> tuple[str, Path, Path]:
     return name, Path(cases), Path(results)
 
 
+def _square(gap: float) -> float:
+    """A gap squared; a diverged candidate (written as 1e308) is infinite."""
+    return gap * gap if gap < 1e150 else math.inf
+
+
 def load(cases: Path, results: Path) -> list[dict]:
     """One row per diagnosed case: truth, named effect, MSE per class, n_eff."""
     truth = json.loads((cases / "truth.json").read_text())["cases"]
@@ -49,9 +54,11 @@ def load(cases: Path, results: Path) -> list[dict]:
         if not path.is_file():
             continue
         d = json.loads(path.read_text())
-        mse = {"none": d["gap_before"] ** 2}
+        mse = {"none": _square(d["gap_before"])}
         for c in d["ranking"]:
-            mse[c["effect"]] = min(mse.get(c["effect"], math.inf), c["gap_after"] ** 2)
+            mse[c["effect"]] = min(
+                mse.get(c["effect"], math.inf), _square(c["gap_after"])
+            )
         ev = d["tests"]["evidence"]
         rows.append(
             {

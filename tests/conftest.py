@@ -105,3 +105,18 @@ def mplcleanup():
 
     yield
     plt.close("all")
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _fresh_compiled_programs():
+    """Each test module leaves no compiled programs behind: late in the full suite
+    XLA's CPU compiler crashed (SIGSEGV in backend_compile_and_load) on programs
+    that compile fine in a shorter run, so the suite no longer accumulates them."""
+    yield
+    import gc
+
+    from hamjax.diagnosis import fit
+
+    fit._EXECUTABLES.clear()
+    jax.clear_caches()
+    gc.collect()

@@ -114,3 +114,26 @@ def run_hamjax(*args):
             "HAMJAX_CACHE_DIR": "off",
         },
     )
+
+
+# Seed 000, n = 5 levels where the ascending border rises above f_d(v_m) at V_2 and
+# then falls (non-monotone) and the descending border stays above the output: the
+# descending path never meets f_d, so from the second period of (24) u stays at
+# its V_2 value on the last (inner) segment instead of returning to f_d(v_m).
+INNER_LEVELS = np.array([-1.0, -0.5, 0.0, 0.5, 1.0])
+INNER_FA = np.array([-2.0, 1.0, 0.6, 0.2, -0.2])
+INNER_FD = np.array([0.0, 2.0, 2.0, 2.0, 2.0])
+
+
+def backlash_periods(backlash, levels, periods=3) -> np.ndarray:
+    """The backlash model of hamjax.models on seed 000's (3) then `periods` cycles
+    of (24): u on the staircase, one row per period."""
+    import jax.numpy as jnp
+
+    import hamjax as hj
+    from hamjax.signals.staircase import staircase_cycle_levels
+
+    cyc = np.asarray(staircase_cycle_levels(levels))
+    v = np.concatenate([levels[-1:], levels[:1], *[cyc] * periods])
+    u = np.asarray(hj.apply_nonlinearity(backlash, jnp.asarray(v)))
+    return u[2:].reshape(periods, -1)

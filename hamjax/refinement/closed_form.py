@@ -11,6 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._results import RESULTS, result_name
+from ..identification.seed000.fgi_table2 import steady_cycle_indices
 from ..identification.seed001 import dead_zone_rule, preload_rule, symmetric_rule
 from .backlash_path import BacklashPathParametrisation
 from .backlash_start import initial_backlash_theta
@@ -208,6 +209,8 @@ def refine_fgi_result(
     settle_samples: int,
     blocks: list[dict],
     dt: float,
+    cycle_stderr=None,
+    z: float = 4.0,
     options: RefinementOptions | None = None,
 ) -> dict:
     """Joint output-error fit of FGI's $G(jk\\omega)$ (every harmonic of
@@ -228,6 +231,14 @@ def refine_fgi_result(
     - `blocks`: the FGI design's blocks (`period_samples`, `periods`,
       `average_start`, `omega`).
     - `dt`: the FGI sampling period (s).
+    - `cycle_stderr`, `z`: the standard errors of `cycle_values` and their
+      threshold, with which the periodic $u$ of the FGI record is rebuilt from
+      the $U_i$ (`steady_cycle_indices`, as `identify_fgi` does); the fitted
+      model follows that selection of the $U_i$.
+
+    **Raises:** `ValueError` where the periodic $u$ cannot be rebuilt from the
+    $U_i$ (`RESULTS.cycle_not_rebuilt`) or the first block's averaged periods
+    start before $u$ is periodic.
 
     `refined` holds `"frequency_response"` (the contract's entries) and
     `"cycle"`, `"ascending"`, `"descending"` (the refined $U_i$, as NBBI writes
@@ -262,6 +273,20 @@ def refine_fgi_result(
         raise ValueError(
             "some frequency-response entries match no block of the design (omega)"
         )
+    index, rebuilt, first = steady_cycle_indices(
+        jnp.asarray(cycle_values, dtype=float),
+        cycle_stderr=None if cycle_stderr is None else jnp.asarray(cycle_stderr, float),
+        z=z,
+    )
+    if not bool(rebuilt):
+        raise ValueError(RESULTS[RESULTS.cycle_not_rebuilt])
+    transient = int(blocks[0].get("transient_periods", first))
+    if transient < int(first):
+        raise ValueError(
+            f"the backlash output is periodic from period {int(first)} of the FGI "
+            f"input on; the first block averages from period {transient}: raise the "
+            "transient periods"
+        )
     p = FGIFrequencyParametrisation(
         n_levels=n,
         nbbi_start=nbbi_start,
@@ -269,6 +294,7 @@ def refine_fgi_result(
         settle_samples=settle_samples,
         blocks=fgi_blocks,
         dt=dt,
+        fgi_cycle=tuple(int(i) for i in np.asarray(index)),
     )
     y_nbbi = np.asarray(y_nbbi, dtype=float)
     y_fgi = np.asarray(y_fgi, dtype=float)

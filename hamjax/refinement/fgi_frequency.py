@@ -14,8 +14,11 @@ the steady-state output is
 $$y(t) = G(0)\,\frac{a_0}{2} + \sum_k \mathrm{Re}\big(G(jk\omega)\, c_k\,
 e^{jk\omega t}\big),$$
 
-kept to the harmonics that FGI keeps (Remark 2b). The harmonics left out are
-orthogonal to the kept ones over whole periods of uniform samples, so they do not
+kept to the harmonics that FGI keeps (Remark 2b). Where the input reverses before
+the descending path meets $f_d$, the periodic $u$ is not the NBBI staircase but a
+selection $U_{\pi(j)}$ of its values (`steady_cycle_indices`, the play operator's
+rule): `fgi_cycle` holds $\pi$, decided once from the closed form. The harmonics
+left out are orthogonal to the kept ones over whole periods of uniform samples, so they do not
 bias the fit; they only add to its residual (hence `replicate_noise_variance`).
 """
 
@@ -84,6 +87,9 @@ class FGIFrequencyParametrisation(AbstractParametrisation):
     - `settle_samples`: samples left out at the start of each hold.
     - `blocks`: the `FGIBlock`s.
     - `dt`: sampling period (s) of the FGI record.
+    - `fgi_cycle`: $\pi$, the index of the $U_i$ that $u$ takes on each segment of
+      the FGI period (`steady_cycle_indices`); default $0..2n-3$, the NBBI
+      staircase itself.
     - `average_replicates`: fit the sufficient statistics instead of the samples:
       each hold's mean of its $N_s$ settled samples and each block's trans-period
       average (20) over its $M$ periods, weighted by $\sqrt{N_s}$ and $\sqrt{M}$.
@@ -101,6 +107,7 @@ class FGIFrequencyParametrisation(AbstractParametrisation):
     settle_samples: int = eqx.field(static=True)
     blocks: tuple[FGIBlock, ...] = eqx.field(static=True)
     dt: float = eqx.field(static=True)
+    fgi_cycle: tuple[int, ...] = eqx.field(static=True)
     average_replicates: bool = eqx.field(static=True)
 
     def __init__(
@@ -112,6 +119,7 @@ class FGIFrequencyParametrisation(AbstractParametrisation):
         settle_samples: int,
         blocks: Sequence[FGIBlock],
         dt: float,
+        fgi_cycle: Sequence[int] | None = None,
         average_replicates: bool = True,
     ):
         self.n_levels = int(n_levels)
@@ -122,6 +130,9 @@ class FGIFrequencyParametrisation(AbstractParametrisation):
         self.dt = float(dt)
         self.average_replicates = bool(average_replicates)
         m = 2 * self.n_levels - 2
+        self.fgi_cycle = tuple(
+            range(m) if fgi_cycle is None else (int(i) for i in fgi_cycle)
+        )
         weights, phasors = [], []
         for b in self.blocks:
             k = np.asarray(b.harmonics)
@@ -156,6 +167,11 @@ class FGIFrequencyParametrisation(AbstractParametrisation):
                 )
         if not self.dt > 0:
             raise ValueError(f"sampling period dt must be > 0; got {self.dt}")
+        if len(self.fgi_cycle) != m or not all(0 <= i < m for i in self.fgi_cycle):
+            raise ValueError(
+                f"fgi_cycle must hold 2n-2 = {m} indices in [0, {m}); got "
+                f"{self.fgi_cycle}"
+            )
 
     @property
     def n_cycle(self) -> int:
@@ -261,8 +277,9 @@ class FGIFrequencyParametrisation(AbstractParametrisation):
         avg = self.average_replicates
         # Eq. (5) in steady state with G(0) = 1: y = U_i in hold i.
         parts = [math.sqrt(per) * u if avg else jnp.repeat(u, per)]
-        mean = jnp.mean(u)  # G(0) a_0 / 2 with G(0) = 1, equal segments
-        uc = u.astype(jnp.complex128)
+        us = u[jnp.asarray(self.fgi_cycle)]  # the periodic u of (24)
+        mean = jnp.mean(us)  # G(0) a_0 / 2 with G(0) = 1, equal segments
+        uc = us.astype(jnp.complex128)
         for b, W, E, gb in zip(self.blocks, self.weights, self.phasors, g, strict=True):
             c = W @ uc  # Eq. (13): c_k = a_k - j b_k of the staircase of the U_i
             one = mean + jnp.real(E @ (gb * c))  # steady state, cf. (22)-(26)
@@ -308,12 +325,12 @@ class FGIFrequencyParametrisation(AbstractParametrisation):
         """A start from the fitted data alone: $U_i$ the mean of the settled samples
         of hold $i$ (NBBI's settled average (5)), then $G(jk\\omega) = (\\alpha_k -
         j\\beta_k)/(a_k - j b_k)$ (25)-(26) with (22) on the trans-period average
-        (20) and (13) of those $U_i$. Free of the plain average's transient bias,
-        so the fit needs a few steps only.
+        (20) and (13) of those $U_i$ (through `fgi_cycle`). Free of the plain
+        average's transient bias, so the fit needs a few steps only.
         """
         holds, periods = self._replicates(y_nbbi, y_fgi)
         u = jnp.mean(holds, axis=1)
-        uc = u.astype(jnp.complex128)
+        uc = u[jnp.asarray(self.fgi_cycle)].astype(jnp.complex128)
         g = []
         for r, W, E in zip(periods, self.weights, self.phasors, strict=True):
             y_f = jnp.mean(r, axis=0).astype(jnp.complex128)  # Eq. (20)

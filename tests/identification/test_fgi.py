@@ -7,11 +7,13 @@ import jax.numpy as jnp
 import jax.random as jr
 import numpy as np
 import pytest
+from helpers import INNER_FA, INNER_FD, INNER_LEVELS, backlash_periods
 from scipy import signal, stats
 
 import hamjax as hj
 from hamjax.identification.seed000.fgi_table2 import (
     identify_fgi,
+    steady_cycle_indices,
     steady_cycle_values,
     trans_period_average,
 )
@@ -20,7 +22,6 @@ from hamjax.identification.seed000.fourier_13_22 import (
     sampled_coefficients,
 )
 from hamjax.papers.seed000.border_shapes import SHAPES, cycle_points
-from hamjax.signals.staircase import staircase_cycle_levels
 
 
 LEVELS = np.array([-1.0, -0.5, 0.0, 0.5, 1.0])
@@ -254,23 +255,6 @@ def _play(levels, fa, fd, periods):
     return np.array(out).reshape(periods, -1)
 
 
-def _simulated(backlash, levels, periods=3):
-    """The backlash model of hamjax.models on (3) then `periods` cycles of (24)."""
-    cyc = np.asarray(staircase_cycle_levels(levels))
-    v = np.concatenate([levels[-1:], levels[:1], *[cyc] * periods])
-    u = np.asarray(hj.apply_nonlinearity(backlash, jnp.asarray(v)))
-    return u[2:].reshape(periods, -1)
-
-
-# n = 5 levels where the ascending border rises above f_d(v_m) at V_2 and then
-# falls (non-monotone) and the descending border stays above the output: the
-# descending path never meets f_d, so from the second period u stays at its V_2
-# value on the last (inner) segment instead of returning to f_d(v_m).
-INNER_LEVELS = np.array([-1.0, -0.5, 0.0, 0.5, 1.0])
-INNER_FA = np.array([-2.0, 1.0, 0.6, 0.2, -0.2])
-INNER_FD = np.array([0.0, 2.0, 2.0, 2.0, 2.0])
-
-
 @pytest.mark.parametrize("n", [3, 4, 6, 9])
 @pytest.mark.parametrize("sign", [1.0, -1.0])
 def test_steady_u_is_the_nbbi_cycle_when_the_path_meets_f_d(n, sign):
@@ -278,23 +262,30 @@ def test_steady_u_is_the_nbbi_cycle_when_the_path_meets_f_d(n, sign):
     # the first cycle, and the rebuild returns it (also after (kF, G/k), k < 0).
     levels = np.linspace(-1.0, 1.0, n)
     for name in sorted(SHAPES):
-        u = sign * _simulated(SHAPES[name](), levels)
+        u = sign * backlash_periods(SHAPES[name](), levels)
         values, ok = steady_cycle_values(u[0])
         assert bool(ok), name
         np.testing.assert_allclose(values, u[-1], atol=1e-12, err_msg=name)
+        index, _, first = steady_cycle_indices(u[0])
+        assert int(first) == 0, name  # the first period of (24) is already steady
+        np.testing.assert_allclose(u[0][np.asarray(index)], u[-1], atol=1e-12)
         np.testing.assert_allclose(u[0], u[-1], atol=1e-12, err_msg=name)
 
 
 @pytest.mark.parametrize("sign", [1.0, -1.0])
 def test_steady_u_when_the_input_reverses_before_the_border(sign):
     bl = hj.Backlash.from_table(INNER_LEVELS, INNER_FA, INNER_FD)
-    u = _simulated(bl, INNER_LEVELS)
+    u = backlash_periods(bl, INNER_LEVELS)
     ref = _play(INNER_LEVELS, INNER_FA, INNER_FD, periods=3)
     np.testing.assert_allclose(u, ref, atol=1e-12)  # the two references agree
     assert abs(u[0, 0] - u[1, 0]) > 0.1  # the first cycle is not the steady one
     values, ok = steady_cycle_values(sign * u[0])
     assert bool(ok)
     np.testing.assert_allclose(values, sign * u[-1], atol=1e-12)
+    # u is a selection of NBBI's points; the model's second period is steady
+    index, _, first = steady_cycle_indices(sign * u[0])
+    np.testing.assert_allclose(u[0][np.asarray(index)], u[1], atol=1e-12)
+    assert int(first) == 1
     # FGI with "G = 1" (output = u, periodic): G-hat = 1 exactly from the rebuilt
     # u; the NBBI staircase itself (the old assumption) is off.
     P = 8 * 40
@@ -319,7 +310,7 @@ def test_steady_u_that_cannot_be_rebuilt_is_reported():
     # f_d(v_m), and whether it reaches f_a(V_2) is not in the NBBI points.
     fa = np.array([-2.0, -1.0, 1.0, 0.5, -0.5])
     bl = hj.Backlash.from_table(INNER_LEVELS, fa, INNER_FD)
-    u = _simulated(bl, INNER_LEVELS)
+    u = backlash_periods(bl, INNER_LEVELS)
     np.testing.assert_allclose(u, _play(INNER_LEVELS, fa, INNER_FD, 3), atol=1e-12)
     assert abs(u[0, 0] - u[-1, 0]) > 0.1
     _, ok = steady_cycle_values(u[0])
@@ -339,11 +330,11 @@ def test_steady_u_with_noisy_points_and_their_stderr():
     # noise; a cycle that repeats comes back unchanged.
     noise = 1e-3 * jr.normal(jr.key(3), (8,))
     bl = hj.Backlash.from_table(INNER_LEVELS, INNER_FA, INNER_FD)
-    u = _simulated(bl, INNER_LEVELS)
+    u = backlash_periods(bl, INNER_LEVELS)
     values, ok = steady_cycle_values(u[0] + noise, cycle_stderr=np.full(8, 1e-3))
     assert bool(ok)
     np.testing.assert_allclose(values, u[-1], atol=5e-3)
-    w = _simulated(SHAPES["straight"](), INNER_LEVELS)[0] + noise
+    w = backlash_periods(SHAPES["straight"](), INNER_LEVELS)[0] + noise
     values, ok = steady_cycle_values(w, cycle_stderr=np.full(8, 1e-3))
     assert bool(ok)
     np.testing.assert_allclose(values, w, atol=1e-14)

@@ -281,18 +281,23 @@ def _refine(args: argparse.Namespace, design: dict, y: np.ndarray, result: dict)
     if not (math.isfinite(settle) and 0 <= settle < hold):
         raise UserInputError(f"--settle must be in [0, hold = {hold:g}); got {settle}")
     settle_samples = int(round(settle / dt_nbbi))
-    refined = refine_fgi_result(
-        y_nbbi,
-        y,
-        result,
-        levels=levels,
-        cycle_values=design["cycle_values"],
-        nbbi_start=int(nbbi_design["init_samples"]),
-        hold_samples=hold_samples,
-        settle_samples=settle_samples,
-        blocks=design["blocks"],
-        dt=float(design["dt"]),
-    )
+    stderr = design.get("cycle_stderr")
+    try:
+        refined = refine_fgi_result(
+            y_nbbi,
+            y,
+            result,
+            levels=levels,
+            cycle_values=design["cycle_values"],
+            cycle_stderr=None if stderr is None else np.asarray(stderr, dtype=float),
+            nbbi_start=int(nbbi_design["init_samples"]),
+            hold_samples=hold_samples,
+            settle_samples=settle_samples,
+            blocks=design["blocks"],
+            dt=float(design["dt"]),
+        )
+    except ValueError as err:
+        raise UserInputError(f"--refine: {err}") from None
     refined["nbbi"] = str(nbbi_dir)
     refined["settle"] = settle_samples * dt_nbbi
     refined["refinement_note"] = (

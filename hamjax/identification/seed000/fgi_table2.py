@@ -37,7 +37,25 @@ def steady_cycle_values(
     z: float = 4.0,
     max_periods: int = 3,
 ) -> tuple[Float[Array, " m"], Bool[Array, ""]]:
-    r"""The backlash output over one steady-state period of (24) from NBBI's points.
+    """The backlash output over one steady-state period of (24) from NBBI's points:
+    `(values, ok)` with `values = cycle_values[i]` for the indices `i` of
+    `steady_cycle_indices` (which see), the $W_i$ where `ok` is false."""
+    w = jnp.asarray(cycle_values, dtype=float)
+    index, ok, _ = steady_cycle_indices(
+        w, cycle_stderr=cycle_stderr, z=z, max_periods=max_periods
+    )
+    return w[index], ok
+
+
+def steady_cycle_indices(
+    cycle_values: Float[ArrayLike, " m"],
+    *,
+    cycle_stderr: Float[ArrayLike, " m"] | None = None,
+    z: float = 4.0,
+    max_periods: int = 3,
+) -> tuple[Int[Array, " m"], Bool[Array, ""], Int[Array, ""]]:
+    r"""Which of NBBI's points the backlash output takes on each segment of one
+    steady-state period of (24).
 
     NBBI measures the first cycle $W_1..W_{2n-2}$ after (3), which leaves point 1 on
     $f_d(v_m)$ (Fig. 5). In the periodic regime of (24) the input falls from $V_2$
@@ -63,9 +81,11 @@ def steady_cycle_values(
       of a difference are equal (no move). Without it, equal to 1e-9 relative.
     - `max_periods`: periods after the first tried before giving up.
 
-    **Returns:** `(values, ok)`: $u$ on the segments of one steady-state period in
-    staircase order, and whether it could be rebuilt (`ok`; `values` are the
-    $W_i$ where not).
+    **Returns:** `(index, ok, first)`: $u = W_{\mathrm{index}_j}$ on segment $j$ of
+    one steady-state period (staircase order; every value of $u$ is one of the
+    $W_i$, so $u$ is a selection of them, differentiable in them), whether it
+    could be rebuilt (`ok`; `index` is $0..m-1$ where not), and the first period
+    of (24) after (3) that is steady (0: the first, which is NBBI's cycle).
     """
     w = jnp.asarray(cycle_values, dtype=float)
     m = w.shape[0]
@@ -94,8 +114,8 @@ def steady_cycle_values(
     d = jnp.where(rising, sign, -sign)  # d*(f - u) >= 0: the border is reached
 
     def _step(carry, xs):
-        x, on, matched, fail = carry
-        w_j, w_jm1, known_j, same_j, d_j, prev_u, prev_on = xs
+        x, xi, on, matched, fail = carry
+        w_j, w_jm1, j, known_j, same_j, d_j, prev_u, prev_i, prev_on = xs
         follow = on & same_j
         onto = d_j * (w_j - x) >= -tol
         # Border unknown at V_j: period 1 stayed at W_{j-1} off it, so
@@ -104,24 +124,38 @@ def steady_cycle_values(
         take = known_j & (follow | onto)
         unknown = ~known_j & (follow | ~stays)
         u = jnp.where(matched, prev_u, jnp.where(take, w_j, x))
+        ui = jnp.where(matched, prev_i, jnp.where(take, j, xi))
         on = jnp.where(matched, prev_on, take)
         fail = fail | (~matched & unknown)
         matched = matched | ((jnp.abs(u - prev_u) <= tol) & (on == prev_on))
-        return (u, on, matched, fail), (u, on)
+        return (u, ui, on, matched, fail), (ui, on, matched)
 
-    def _period(carry, _):
-        prev_u, prev_on, ok, broken, steady = carry
-        init = (prev_u[m - 1], prev_on[m - 1], jnp.asarray(False), jnp.asarray(False))
-        xs = (w, w_prev, known, same, d, prev_u, prev_on)
-        (_, _, matched, fail), (us, ons) = jax.lax.scan(_step, init, xs)
+    steps = jnp.arange(m)
+
+    def _period(carry, period):
+        prev_u, prev_i, prev_on, ok, broken, steady, first = carry
+        init = (
+            prev_u[m - 1],
+            prev_i[m - 1],
+            prev_on[m - 1],
+            jnp.asarray(False),
+            jnp.asarray(False),
+        )
+        xs = (w, w_prev, steps, known, same, d, prev_u, prev_i, prev_on)
+        (_, _, _, matched, fail), (uis, ons, hist) = jax.lax.scan(_step, init, xs)
         broken = broken | fail  # a step undecided: later periods are unknown too
         newly = matched & ~broken & ~ok
-        steady = jnp.where(newly, us, steady)
-        return (us, ons, ok | newly, broken, steady), None
+        # The state at the first matched step repeats the last period's there, so
+        # this period is steady throughout (and the last one too if at step 0).
+        steady = jnp.where(newly, uis, steady)
+        first = jnp.where(newly, jnp.where(hist[0], period - 1, period), first)
+        return (w[uis], uis, ons, ok | newly, broken, steady, first), None
 
-    init = (w, known, jnp.asarray(False), jnp.asarray(False), w)
-    (_, _, ok, _, steady), _ = jax.lax.scan(_period, init, None, length=max_periods)
-    return steady, ok
+    false = jnp.asarray(False)
+    init = (w, steps, known, false, false, steps, jnp.asarray(0))
+    periods = jnp.arange(1, max_periods + 1)
+    (_, _, _, ok, _, steady, first), _ = jax.lax.scan(_period, init, periods)
+    return steady, ok, first
 
 
 class FGIResult(eqx.Module):

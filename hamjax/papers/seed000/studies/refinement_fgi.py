@@ -27,7 +27,11 @@ import jax.random as jr
 import numpy as np
 
 from ...._argtypes import float_list, positive_float
-from ....identification.seed000.fgi_table2 import identify_fgi
+from ...._results import RESULTS
+from ....identification.seed000.fgi_table2 import (
+    identify_fgi,
+    steady_cycle_indices,
+)
 from ....identification.seed000.nbbi_table1 import identify_nbbi
 from ....models import noise_std_for_snr
 from ....montecarlo.config import MonteCarloConfig
@@ -135,6 +139,9 @@ def make_design(plant, levels, *, hold, dt, omegas, periods, settle_fraction):
             FGIBlock(period_samples=P, periods=periods, start=avg, harmonics=kept)
         )
     hold_samples = int(round(hold / dt))
+    index, rebuilt, _ = steady_cycle_indices(U)
+    if not bool(rebuilt):
+        raise ValueError(RESULTS[RESULTS.cycle_not_rebuilt])
     p = FGIFrequencyParametrisation(
         n_levels=int(levels.shape[0]),
         nbbi_start=int(v0.shape[0]),
@@ -142,6 +149,7 @@ def make_design(plant, levels, *, hold, dt, omegas, periods, settle_fraction):
         settle_samples=int(settle_fraction * hold_samples),
         blocks=blocks,
         dt=dt,
+        fgi_cycle=tuple(int(i) for i in np.asarray(index)),
     )
     g = [
         plant.linear.frequency_response(jnp.asarray(b.harmonics, dtype=float) * w)

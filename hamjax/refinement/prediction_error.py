@@ -86,8 +86,8 @@ def refine(
 
     For parametrisations with a `with_smoothing(width)` method (a map that is not
     differentiable at its breakpoints), the fit is run with each width of
-    `options.annealing` in turn, each started from the previous solution, and
-    finally with the exact map; the reported optimum is the exact map's. Where the
+    `options.annealing` in turn, each started from the previous admissible
+    solution (`is_valid`), and finally with the exact map; the reported optimum is the exact map's. Where the
     parametrisation has `place_breakpoints(theta, v, y)`, it places the breakpoints
     in their gaps between input values before the exact stage.
 
@@ -129,8 +129,11 @@ def refine(
         stages = [parametrisation.with_smoothing(w * scale) for w in options.annealing]
     for stage in stages:
         sol = _solve(stage, theta, v, y, options)
-        # A failed smoothed stage is not fatal: the exact stage decides.
-        keep = jnp.all(jnp.isfinite(sol.value))
+        # A failed smoothed stage is not fatal: the next one starts from the last
+        # admissible point and the exact stage decides. An inadmissible end point
+        # (e.g. crossed breakpoints d1 < 0 < d2, which the smoothed map can fit
+        # and Fig. 2's cannot) is not a model of the class: it is dropped too.
+        keep = jnp.all(jnp.isfinite(sol.value)) & stage.is_valid(sol.value)
         theta = jnp.where(keep, sol.value, theta)
         steps = steps + sol.stats["num_steps"]
     if hasattr(parametrisation, "place_breakpoints"):

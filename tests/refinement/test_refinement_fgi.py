@@ -158,6 +158,7 @@ def _inner_records(g, *, periods=3, P=48, start=10, sigma=0.0, key=0):
     return w, steady, y_nbbi, y_fgi
 
 
+INNER_DESIGN = dict(nbbi_start=5, hold_samples=30, settle_samples=10, dt=0.1)
 G_INNER = np.array([0.9 - 0.3j, 0.5 - 0.6j, 0.2 - 0.5j])
 
 
@@ -166,11 +167,8 @@ def _inner_parametrisation(index):
     NBBI staircase itself)."""
     return FGIFrequencyParametrisation(
         n_levels=5,
-        nbbi_start=5,
-        hold_samples=30,
-        settle_samples=10,
         blocks=(FGIBlock(period_samples=48, periods=3, start=10, harmonics=(1, 2, 3)),),
-        dt=0.1,
+        **INNER_DESIGN,
         fgi_cycle=None if index is None else tuple(int(i) for i in np.asarray(index)),
     )
 
@@ -201,14 +199,7 @@ def test_inner_segment_u_is_followed_and_recovered_noise_free():
         "average_start": 10,
         "transient_periods": 1,
     }
-    kw = dict(
-        levels=INNER_LEVELS,
-        nbbi_start=5,
-        hold_samples=30,
-        settle_samples=10,
-        blocks=[block],
-        dt=0.1,
-    )
+    kw = dict(levels=INNER_LEVELS, blocks=[block], **INNER_DESIGN)
     r = refine_fgi_result(
         y_nbbi, y_fgi, {"frequency_response": entries}, cycle_values=w + 0.01, **kw
     )
@@ -237,16 +228,11 @@ def test_inner_segment_u_is_followed_and_recovered_noise_free():
         )
 
 
-def test_inner_segment_gradients_match_finite_differences():
-    from hamjax.identification.seed000.fgi_table2 import steady_cycle_indices
-
-    w, *_ = _inner_records(G_INNER)
-    index, _, _ = steady_cycle_indices(w)
-    p = _inner_parametrisation(index)
-    theta = p.pack(w, [G_INNER])
+def _jacobian_matches_finite_differences(p, theta):
+    """jacfwd of `p.predict` against central differences; returns the Jacobian.
+    predict is polynomial (bilinear) in theta: central differences are exact to
+    O(h^2 * third derivative) = 0, round-off ~ 1e-16 / h = 1e-10."""
     J = np.asarray(jax.jacfwd(p.predict)(theta, None))
-    # predict is polynomial (bilinear) in theta: central differences are exact
-    # to O(h^2 * third derivative) = 0, round-off ~ 1e-16 / h.
     h = 1e-6
     fd = np.stack(
         [
@@ -260,6 +246,17 @@ def test_inner_segment_gradients_match_finite_differences():
         axis=1,
     )
     np.testing.assert_allclose(J, fd, atol=1e-8)
+    return J
+
+
+def test_inner_segment_gradients_match_finite_differences():
+    from hamjax.identification.seed000.fgi_table2 import steady_cycle_indices
+
+    w, *_ = _inner_records(G_INNER)
+    index, _, _ = steady_cycle_indices(w)
+    p = _inner_parametrisation(index)
+    theta = p.pack(w, [G_INNER])
+    J = _jacobian_matches_finite_differences(p, theta)
     # the U_i the FGI period does not visit enter through the NBBI holds only
     unused = sorted(set(range(8)) - set(p.fgi_cycle))
     assert unused
@@ -284,11 +281,8 @@ def test_cycle_not_rebuilt_is_refused():
             {"frequency_response": entries},
             levels=INNER_LEVELS,
             cycle_values=w,
-            nbbi_start=5,
-            hold_samples=30,
-            settle_samples=10,
             blocks=[block],
-            dt=0.1,
+            **INNER_DESIGN,
         )
 
 
@@ -320,20 +314,8 @@ def test_averaged_replicates_give_the_same_estimate_and_bound():
 @pytest.mark.slow
 def test_gradients_match_finite_differences():
     p, theta = _small()
-    J = np.asarray(jax.jacfwd(p.predict)(theta, None))
+    _jacobian_matches_finite_differences(p, theta)
     h = 1e-6
-    fd = np.stack(
-        [
-            (
-                np.asarray(p.predict(theta + h * e, None))
-                - np.asarray(p.predict(theta - h * e, None))
-            )
-            / (2 * h)
-            for e in np.eye(theta.shape[0])
-        ],
-        axis=1,
-    )
-    np.testing.assert_allclose(J, fd, atol=1e-8)
     # and the cost gradient of the output-error criterion
     y = p.predict(theta, None) + 0.1 * jr.normal(jr.key(0), (p.n_samples,))
     cost = lambda th: 0.5 * jnp.sum((y - p.predict(th, None)) ** 2)

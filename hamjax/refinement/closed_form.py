@@ -209,7 +209,6 @@ def refine_fgi_result(
     settle_samples: int,
     blocks: list[dict],
     dt: float,
-    cycle_stderr=None,
     z: float = 4.0,
     options: RefinementOptions | None = None,
 ) -> dict:
@@ -231,10 +230,11 @@ def refine_fgi_result(
     - `blocks`: the FGI design's blocks (`period_samples`, `periods`,
       `average_start`, `omega`).
     - `dt`: the FGI sampling period (s).
-    - `cycle_stderr`, `z`: the standard errors of `cycle_values` and their
-      threshold, with which the periodic $u$ of the FGI record is rebuilt from
-      the $U_i$ (`steady_cycle_indices`, as `identify_fgi` does); the fitted
-      model follows that selection of the $U_i$.
+    - `z`: the periodic $u$ of the FGI record is rebuilt from the settled hold
+      means (`FGIFrequencyParametrisation.settled_cycle`) by
+      `steady_cycle_indices`, two means within `z` standard errors of a
+      difference being equal; the fitted model follows that selection of the
+      $U_i$.
 
     **Raises:** `ValueError` where the periodic $u$ cannot be rebuilt from the
     $U_i$ (`RESULTS.cycle_not_rebuilt`) or the first block's averaged periods
@@ -273,10 +273,27 @@ def refine_fgi_result(
         raise ValueError(
             "some frequency-response entries match no block of the design (omega)"
         )
+    y_nbbi = np.asarray(y_nbbi, dtype=float)
+    y_fgi = np.asarray(y_fgi, dtype=float)
+
+    def model(fgi_cycle=None):
+        return FGIFrequencyParametrisation(
+            n_levels=n,
+            nbbi_start=nbbi_start,
+            hold_samples=hold_samples,
+            settle_samples=settle_samples,
+            blocks=fgi_blocks,
+            dt=dt,
+            fgi_cycle=fgi_cycle,
+        )
+
+    # The periodic u of the FGI record, rebuilt from the settled hold means (free
+    # of the plain average's transient bias, which also inflates NBBI's stderr)
+    # with their standard errors sigma / sqrt(N_s).
+    p = model()
+    settled_u, settled_se = p.settled_cycle(y_nbbi, y_fgi)
     index, rebuilt, first = steady_cycle_indices(
-        jnp.asarray(cycle_values, dtype=float),
-        cycle_stderr=None if cycle_stderr is None else jnp.asarray(cycle_stderr, float),
-        z=z,
+        settled_u, cycle_stderr=settled_se, z=z
     )
     if not bool(rebuilt):
         raise ValueError(RESULTS[RESULTS.cycle_not_rebuilt])
@@ -287,17 +304,7 @@ def refine_fgi_result(
             f"input on; the first block averages from period {transient}: raise the "
             "transient periods"
         )
-    p = FGIFrequencyParametrisation(
-        n_levels=n,
-        nbbi_start=nbbi_start,
-        hold_samples=hold_samples,
-        settle_samples=settle_samples,
-        blocks=fgi_blocks,
-        dt=dt,
-        fgi_cycle=tuple(int(i) for i in np.asarray(index)),
-    )
-    y_nbbi = np.asarray(y_nbbi, dtype=float)
-    y_fgi = np.asarray(y_fgi, dtype=float)
+    p = model(tuple(int(i) for i in np.asarray(index)))
     y = p.select(y_nbbi, y_fgi)
     # The closed form's U_i may carry the plain average's transient bias, which
     # makes a poor start; the settled start (`initial_theta`) is used where its

@@ -328,8 +328,8 @@ class FGIFrequencyParametrisation(AbstractParametrisation):
         (20) and (13) of those $U_i$ (through `fgi_cycle`). Free of the plain
         average's transient bias, so the fit needs a few steps only.
         """
-        holds, periods = self._replicates(y_nbbi, y_fgi)
-        u = jnp.mean(holds, axis=1)
+        _, periods = self._replicates(y_nbbi, y_fgi)
+        u, _ = self.settled_cycle(y_nbbi, y_fgi)
         uc = u[jnp.asarray(self.fgi_cycle)].astype(jnp.complex128)
         g = []
         for r, W, E in zip(periods, self.weights, self.phasors, strict=True):
@@ -337,6 +337,16 @@ class FGIFrequencyParametrisation(AbstractParametrisation):
             coeff = (2.0 / r.shape[1]) * (jnp.conj(E).T @ y_f)  # Eq. (22), rectangle
             g.append(coeff / (W @ uc))  # Eq. (25)-(26)
         return self.pack(u, g)
+
+    def settled_cycle(
+        self, y_nbbi: Float[ArrayLike, " time_nbbi"], y_fgi: Float[ArrayLike, " time"]
+    ) -> tuple[Float[Array, " m"], Float[Array, " m"]]:
+        """The settled average (5) of each hold, $\\bar y_i$ over its $N_s$ settled
+        samples, and its standard error $\\hat\\sigma/\\sqrt{N_s}$
+        (`replicate_noise_variance`)."""
+        holds, _ = self._replicates(y_nbbi, y_fgi)
+        se = jnp.sqrt(self.replicate_noise_variance(y_nbbi, y_fgi) / holds.shape[1])
+        return jnp.mean(holds, axis=1), jnp.full(holds.shape[0], se)
 
     def replicate_noise_variance(
         self, y_nbbi: Float[ArrayLike, " time_nbbi"], y_fgi: Float[ArrayLike, " time"]

@@ -281,7 +281,6 @@ def _refine(args: argparse.Namespace, design: dict, y: np.ndarray, result: dict)
     if not (math.isfinite(settle) and 0 <= settle < hold):
         raise UserInputError(f"--settle must be in [0, hold = {hold:g}); got {settle}")
     settle_samples = int(round(settle / dt_nbbi))
-    stderr = design.get("cycle_stderr")
     try:
         refined = refine_fgi_result(
             y_nbbi,
@@ -289,7 +288,6 @@ def _refine(args: argparse.Namespace, design: dict, y: np.ndarray, result: dict)
             result,
             levels=levels,
             cycle_values=design["cycle_values"],
-            cycle_stderr=None if stderr is None else np.asarray(stderr, dtype=float),
             nbbi_start=int(nbbi_design["init_samples"]),
             hold_samples=hold_samples,
             settle_samples=settle_samples,

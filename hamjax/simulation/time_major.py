@@ -6,9 +6,10 @@ scan over time once, with the realisations as the vector axis inside the scan bo
 take a static `unroll`. `simulate_time_major` returns the outputs (it is what
 `hamjax.simulate_batch` runs); `output_summary_time_major` keeps only running
 summaries in the carry; `output_summary_drawn` also draws its input block by block
-inside the scan (`hamjax.montecarlo.random`), so no input is stored. All equal
-`hamjax.simulate` (tested), which remains the definition. Seed 001's (4.1) has its
-time-major form beside the reference, in
+inside the scan (`hamjax.montecarlo.random`), so no input is stored; `scan_blocks`
+is that block-by-block scan for any step. All equal `hamjax.simulate` (tested),
+which remains the definition. Seed 001's (4.1) has its time-major forms (outputs
+given, or their noise drawn inside the scan) beside the reference, in
 `identification/seed001/normalised_gradient_4_1.py`.
 """
 
@@ -18,7 +19,7 @@ import equinox as eqx
 import jax
 import jax.lax as lax
 import jax.numpy as jnp
-from jaxtyping import Array, Float, UInt
+from jaxtyping import Array, Float, PyTree, UInt
 
 from ..models import (
     AbstractHysteresisNonlinearity,
@@ -170,29 +171,51 @@ def output_summary_drawn(
     `draw(b)` ($K$ = `block`), drawn inside the scan: memory $O$(`block` x batch)."""
     st = _discrete_stepper(plant)
     check_unroll(unroll)
-    step = _summary_step(st)
+
+    def init(v0):
+        zeros = jnp.zeros(v0.shape[1], v0.dtype)
+        return (st.init(v0[0]), zeros, zeros, zeros)
+
+    _, total, squares, peak = scan_blocks(
+        _summary_step(st), init, draw, n_samples=n_samples, block=block, unroll=unroll
+    )
+    return _summaries(total, squares, peak, n_samples)
+
+
+def scan_blocks(
+    step: Callable,
+    init: Callable,
+    block_xs: Callable[[UInt[Array, ""]], PyTree],
+    *,
+    n_samples: int,
+    block: int,
+    unroll: int = 1,
+):
+    """The final carry of `lax.scan(step, init(block_xs(0)), xs)` over `n_samples`
+    samples whose `xs` for samples $[bK, (b+1)K)$ are `block_xs(b)` (a pytree with
+    leading axis $K$ = `block`), each block made inside the scan: only one block of
+    `xs` ever exists (the last one is cut to the samples left)."""
+    check_unroll(unroll)
+    if block < 1 or n_samples < 1:
+        raise ValueError(f"need block, n_samples >= 1; got {block}, {n_samples}")
     n_full, rest = divmod(n_samples, block)
 
-    def run_block(carry, b, size):
-        v = draw(b)[:size]
-        carry, _ = lax.scan(step, carry, v, unroll=min(unroll, size))
+    def run_block(carry, xs, size):
+        xs = jax.tree.map(lambda x: x[:size], xs)
+        carry, _ = lax.scan(step, carry, xs, unroll=min(unroll, size))
         return carry
 
-    v0 = draw(jnp.uint32(0))
-    zeros = jnp.zeros(v0.shape[1], v0.dtype)
-    carry = (st.init(v0[0]), zeros, zeros, zeros)
-    first = min(block, n_samples)
-    carry, _ = lax.scan(step, carry, v0[:first], unroll=min(unroll, first))
+    xs0 = block_xs(jnp.uint32(0))
+    carry = run_block(init(xs0), xs0, min(block, n_samples))
     if n_full > 1:
         carry, _ = lax.scan(
-            lambda c, b: (run_block(c, b, block), None),
+            lambda c, b: (run_block(c, block_xs(b), block), None),
             carry,
             jnp.arange(1, n_full, dtype=jnp.uint32),
         )
     if rest and n_full >= 1:
-        carry = run_block(carry, jnp.uint32(n_full), rest)
-    _, total, squares, peak = carry
-    return _summaries(total, squares, peak, n_samples)
+        carry = run_block(carry, block_xs(jnp.uint32(n_full)), rest)
+    return carry
 
 
 def _discrete_stepper(plant: Hammerstein) -> _Stepper:

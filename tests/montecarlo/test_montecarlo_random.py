@@ -124,9 +124,9 @@ CHILD = textwrap.dedent(
     jax.config.update("jax_enable_x64", True)
     from hamjax.montecarlo import MonteCarloConfig, run_monte_carlo
     from hamjax.papers.engine.studies.simulation_throughput import make_trial
-from hamjax.papers.seed001.studies._normalised_gradient_trial import (
-    make_gradient_trial,
-)
+    from hamjax.papers.seed001.studies._normalised_gradient_trial import (
+        make_gradient_trial,
+    )
 
     assert len(jax.devices()) == 2, jax.devices()
     trial = make_trial(n_samples=120)
@@ -136,9 +136,6 @@ from hamjax.papers.seed001.studies._normalised_gradient_trial import (
             jr.key(9, impl=impl), trial, MonteCarloConfig(realisations=7, chunk=3)
         )
         res[impl] = got["rms"]
-    from hamjax.papers.seed001.studies._normalised_gradient_trial import (
-        make_gradient_trial,
-    )
     gradient, _ = make_gradient_trial(n_samples=120)
     res["gradient"] = run_monte_carlo(
         jr.key(9), gradient, MonteCarloConfig(realisations=7, chunk=3)

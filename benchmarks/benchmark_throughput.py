@@ -94,73 +94,13 @@ def _workload1_trial(n_samples: int, unroll: int):
     )
 
 
-def _workload2_setup(n_samples: int):
-    """Seed 001 V.C: input (5.1), noise-free output, input part of (3.8b), theta*."""
-    import jax.numpy as jnp
-
-    import hamjax as hj
-    from hamjax.identification import seed001 as rpl
-
-    levels = jnp.asarray(LEVELS)
-    periods = math.ceil(n_samples / 14)
-    _, v = hj.pe_impulse_sequence(levels, order=2, periods=periods)
-    v = v[:n_samples]
-    nl = hj.PiecewiseLinear(k1=1.0, k2=2.0, d1=1.0, d2=-2.0, l1=1.0, l2=-2.0)
-    plant = hj.Hammerstein(nl, hj.DiscreteTransferFunction(B, A))
-    w = hj.simulate(plant, v)
-    g = rpl.regressor(v, w, levels=levels, order=2)[:, 2:]  # same for every y
-    d = rpl.lagrange_coefficients(levels, nl(levels))
-    theta_star = rpl.theta_star(jnp.asarray(A[1:]), jnp.asarray(B[1:]), d)
-    rho = 2.0 * float(jnp.linalg.norm(theta_star))
-    return v, w, g, theta_star, rho
-
-
 def _workload2_trial(n_samples: int, unroll: int):
-    import equinox as eqx
-    import jax.numpy as jnp
-    from jaxtyping import Array
-
-    from hamjax.identification import seed001 as rpl
-    from hamjax.identification.seed001.normalised_gradient_4_1 import (
-        normalised_gradient_time_major,
+    """Seed 001 V.C: input (5.1), y = w + noise, (4.1) from theta0 = 0; theta*."""
+    from hamjax.papers.seed001.studies._normalised_gradient_trial import (
+        make_gradient_trial,
     )
-    from hamjax.montecarlo.random import normal_blocks
 
-    v, w, g, theta_star, rho = _workload2_setup(n_samples)
-
-    class NormalisedGradientTrial(eqx.Module):
-        """Realisation r: y = w + noise; final estimate of (4.1a-b) from theta0 = 0."""
-
-        v: Array
-        w: Array
-        g: Array
-        levels: Array
-        rho: float = eqx.field(static=True)
-        unroll: int = eqx.field(static=True)
-
-        def outputs(self, key):
-            return self.w + NOISE_STD * normal_blocks(key, self.w.shape[0])
-
-        def __call__(self, key):
-            y = self.outputs(key)
-            phi = rpl.regressor(self.v, y, levels=self.levels, order=2)
-            return rpl.normalised_gradient(phi, y, theta0=jnp.zeros(10), rho=self.rho)[
-                0
-            ]
-
-        def batched(self, keys):
-            y = eqx.filter_vmap(self.outputs)(keys).T
-            return normalised_gradient_time_major(
-                y,
-                self.g,
-                order=2,
-                theta0=jnp.zeros(10),
-                rho=self.rho,
-                unroll=self.unroll,
-            )
-
-    trial = NormalisedGradientTrial(v, w, g, jnp.asarray(LEVELS), rho, unroll)
-    return trial, theta_star
+    return make_gradient_trial(n_samples=n_samples, noise_std=NOISE_STD, unroll=unroll)
 
 
 # --- peers: NumPy/Python, scipy, numba (the same algorithms, written per sample) -------

@@ -15,6 +15,9 @@ from helpers import run_on_two_devices
 import hamjax as hj
 from hamjax.montecarlo import MonteCarloConfig, random as mcrandom, run_monte_carlo
 from hamjax.papers.engine.studies.simulation_throughput import make_trial
+from hamjax.papers.seed001.studies._normalised_gradient_trial import (
+    make_gradient_trial,
+)
 from hamjax.simulation.time_major import output_summary
 
 
@@ -77,6 +80,41 @@ def test_engine_draws_depend_only_on_seed_and_index(impl):
             )
 
 
+# (4.1) is a contraction-like recursion over up to 300 steps whose time-major form
+# sums phi^T theta in another order (10 terms): rounding differences of a few ulp
+# per step, as in the time-major test of tests/montecarlo/test_montecarlo.py, so the
+# same rtol 1e-10 / atol 1e-12 (estimates are O(1)).
+GRADIENT_TOL = dict(rtol=1e-10, atol=1e-12)
+
+
+@pytest.mark.parametrize("n_samples", [30, 50, 137])
+def test_drawn_gradient_equals_the_trial(n_samples):
+    """Workload 2's engine form (noise drawn inside the scan) equals vmap of the
+    per-realisation trial, (4.1) on regressor(v, w + e_r), for any length."""
+    trial, _ = make_gradient_trial(n_samples=n_samples, unroll=3)
+    keys = jax.vmap(lambda r: jr.fold_in(jr.key(6), r))(jnp.arange(4))
+    batched = eqx.filter_jit(trial.batched)(keys)
+    assert batched.shape == (4, 10)
+    # Less than a block, one block, blocks and a partial block.
+    ref = eqx.filter_jit(eqx.filter_vmap(trial))(keys)
+    np.testing.assert_allclose(batched, ref, **GRADIENT_TOL)
+
+
+def test_gradient_engine_depends_only_on_seed_and_index():
+    trial, _ = make_gradient_trial(n_samples=120)
+    key = jr.key(9, impl="threefry4x32")
+    runs = [
+        run_monte_carlo(key, trial, MonteCarloConfig(realisations=7, chunk=c))
+        for c in (3, 8)  # a padded last chunk; one chunk wider than R
+    ]
+    keys = jax.vmap(lambda r: jr.fold_in(key, r))(jnp.arange(7))
+    ref = eqx.filter_jit(eqx.filter_vmap(trial))(keys)
+    for res in runs:
+        # The same draws whatever the chunk; only the vector width (and with it
+        # the compiler's use of FMA in remainder loops) changes: rounding only.
+        np.testing.assert_allclose(res, ref, **GRADIENT_TOL)
+
+
 CHILD = textwrap.dedent(
     """
     import sys
@@ -86,6 +124,9 @@ CHILD = textwrap.dedent(
     jax.config.update("jax_enable_x64", True)
     from hamjax.montecarlo import MonteCarloConfig, run_monte_carlo
     from hamjax.papers.engine.studies.simulation_throughput import make_trial
+    from hamjax.papers.seed001.studies._normalised_gradient_trial import (
+        make_gradient_trial,
+    )
 
     assert len(jax.devices()) == 2, jax.devices()
     trial = make_trial(n_samples=120)
@@ -95,6 +136,10 @@ CHILD = textwrap.dedent(
             jr.key(9, impl=impl), trial, MonteCarloConfig(realisations=7, chunk=3)
         )
         res[impl] = got["rms"]
+    gradient, _ = make_gradient_trial(n_samples=120)
+    res["gradient"] = run_monte_carlo(
+        jr.key(9), gradient, MonteCarloConfig(realisations=7, chunk=3)
+    )
     np.savez(sys.argv[1], **res)
     """
 )
@@ -109,6 +154,11 @@ def test_two_devices_give_the_one_device_draws(tmp_path):
             jr.key(9, impl=impl), trial, MonteCarloConfig(realisations=7, chunk=5)
         )
         np.testing.assert_allclose(sharded[impl], single["rms"], rtol=1e-12, atol=0)
+    gradient, _ = make_gradient_trial(n_samples=120)
+    single = run_monte_carlo(
+        jr.key(9), gradient, MonteCarloConfig(realisations=7, chunk=5)
+    )
+    np.testing.assert_allclose(sharded["gradient"], single, rtol=1e-12, atol=0)
 
 
 def test_manifest_records_key_impl_and_refuses_another(tmp_path):

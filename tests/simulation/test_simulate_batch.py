@@ -8,6 +8,7 @@ import pytest
 
 import hamjax as hj
 from hamjax.identification import seed001 as rpl
+from hamjax.simulation import time_major
 
 
 DTF = hj.DiscreteTransferFunction([0.0, 1.0, -2.0], [1.0, -1.5, 0.56])
@@ -44,6 +45,57 @@ def test_simulate_batch_equals_vmap_of_simulate(name):
     np.testing.assert_allclose(got, ref, rtol=1e-12, atol=1e-12)
     tm = jax.jit(lambda V: hj.simulate_batch(plant, V, time_axis=0))(V.T)
     np.testing.assert_allclose(tm.T, ref, rtol=1e-12, atol=1e-12)
+
+
+def _general(plant):
+    """The time-major step of `plant` through `Backlash.step` (the play form off)."""
+    return time_major._Stepper(plant, time_major.stepper(plant).linear, play=False)
+
+
+@pytest.mark.parametrize("width", [0.0, 0.37, 0.5, 2.0])
+def test_play_operator_step_equals_backlash_step_bit_for_bit(width):
+    """A straight-line backlash is stepped as the play operator; it equals the
+    general `Backlash.step` exactly, also on inputs that stop, reverse and
+    repeat (a staircase with steps smaller and larger than the width)."""
+    plant = hj.Hammerstein(hj.Backlash.from_width(width), DTF)
+    rng = np.random.default_rng(3)
+    noise = rng.normal(size=(6, 400))
+    stairs = np.repeat(rng.normal(scale=0.6, size=(6, 80)), 5, axis=1)
+    V = jnp.asarray(np.concatenate([noise, stairs]))
+    play = time_major.stepper(plant)
+    assert play.play
+
+    def run(st):
+        _, w = jax.lax.scan(lambda c, vk: st.step(c, vk), st.init(V[:, 0]), V.T)
+        return w
+
+    np.testing.assert_array_equal(run(play), run(_general(plant)))
+    ref = jax.vmap(lambda v: hj.simulate(plant, v))(V)
+    np.testing.assert_array_equal(hj.simulate_batch(plant, V).T, ref.T)
+
+
+def test_play_operator_only_where_it_is_exact():
+    """Crossed borders, a given start, tabulated borders and traced offsets take
+    the general step."""
+    assert time_major.is_play_operator(hj.Backlash.from_width(0.5))
+    crossed = hj.Backlash(
+        ascending=hj.Shifted(offset=0.3), descending=hj.Shifted(offset=-0.3)
+    )
+    assert not time_major.is_play_operator(crossed)
+    assert not time_major.is_play_operator(hj.Backlash.from_width(0.5, u0=0.1))
+    grid = jnp.linspace(-3.0, 3.0, 7)
+    table = hj.Backlash.from_table(grid, grid - 0.2, grid + 0.2)
+    assert not time_major.is_play_operator(table)
+    assert not time_major.is_play_operator(hj.DeadZone.symmetric(0.3))
+    seen = []
+
+    @jax.jit
+    def traced(c):
+        seen.append(time_major.is_play_operator(hj.Backlash.from_width(c)))
+        return c
+
+    traced(0.5)
+    assert seen == [False]
 
 
 def test_simulate_batch_continuous_by_zoh():

@@ -1,11 +1,13 @@
 """Normalised gradient with projection on a ball, (4.1a-b) of seed 001."""
 
+from collections.abc import Callable
+
 import jax.lax as lax
 import jax.numpy as jnp
-from jaxtyping import Array, Float, Int
+from jaxtyping import Array, Float, Int, UInt
 
 from ..._types import Signal
-from ...simulation.time_major import check_unroll
+from ...simulation.time_major import check_unroll, scan_blocks
 from .reparametrisation_3_2_to_3_8 import regressor
 
 
@@ -128,19 +130,84 @@ def normalised_gradient_time_major(
     if y.ndim != 2 or g.ndim != 2 or g.shape[0] != y.shape[0]:
         raise ValueError(f"need y (time, batch), g (time, q); got {y.shape}, {g.shape}")
     check_unroll(unroll)
+    n = _check_order(order, theta0, g)
+    theta, lags = _time_major_init(theta0, n, y.shape[1], y.dtype)
+    step = _time_major_step(n, rho)
+    xs = (y, g, jnp.sum(g * g, axis=1))
+    (theta, _), _ = lax.scan(step, (theta, lags), xs, unroll=unroll)
+    return theta.T
+
+
+def normalised_gradient_drawn(
+    w: Float[Array, " time"],
+    g: Float[Array, "time q"],
+    noise: Callable[[UInt[Array, ""]], Float[Array, "block batch"]],
+    *,
+    block: int,
+    order: int,
+    theta0: Float[Array, " p"],
+    rho: float,
+    unroll: int = 1,
+) -> Float[Array, "batch p"]:
+    r"""`normalised_gradient_time_major` of the outputs $y = w + e$ whose noise
+    samples $[bK, (b+1)K)$ are `noise(b)` ($K$ = `block`, shape `(block, batch)`),
+    drawn block by block inside the time scan: the `(time, batch)` outputs are
+    never stored (memory $O$(`block` x batch)). `w` is the common noise-free
+    output, `g` the common input part of the regressor (3.8b)."""
+    if w.ndim != 1 or g.ndim != 2 or g.shape[0] != w.shape[0]:
+        raise ValueError(f"need w (time,), g (time, q); got {w.shape}, {g.shape}")
+    n = _check_order(order, theta0, g)
+    n_samples = w.shape[0]
+    # Padded to whole blocks, so that every block is a full-size dynamic slice.
+    pad = -n_samples % block
+    common = (
+        jnp.pad(w, (0, pad)),
+        jnp.pad(g, ((0, pad), (0, 0))),
+        jnp.pad(jnp.sum(g * g, axis=1), (0, pad)),
+    )
+
+    def block_xs(b):
+        w_b, g_b, gg_b = (
+            lax.dynamic_slice_in_dim(x, b * block, block, axis=0) for x in common
+        )
+        return w_b[:, None] + noise(b), g_b, gg_b
+
+    def init(xs0):
+        return _time_major_init(theta0, n, xs0[0].shape[1], xs0[0].dtype)
+
+    theta, _ = scan_blocks(
+        _time_major_step(n, rho),
+        init,
+        block_xs,
+        n_samples=n_samples,
+        block=block,
+        unroll=unroll,
+    )
+    return theta.T
+
+
+def _check_order(order: int, theta0, g) -> int:
     n = int(order)
     if theta0.shape != (n + g.shape[1],):
         raise ValueError(
             f"theta0 must have {n + g.shape[1]} entries; got {theta0.shape}"
         )
-    batch = y.shape[1]
-    theta = jnp.broadcast_to(theta0[:, None], (theta0.shape[0], batch)).astype(y.dtype)
-    lags = jnp.zeros((n, batch), y.dtype)
-    g_norm2 = jnp.sum(g * g, axis=1)
+    return n
+
+
+def _time_major_init(theta0, n: int, batch: int, dtype):
+    theta = jnp.broadcast_to(theta0[:, None], (theta0.shape[0], batch)).astype(dtype)
+    return theta, jnp.zeros((n, batch), dtype)
+
+
+def _time_major_step(n: int, rho: float):
+    """One sample of (4.1a-b) for a batch: carry `(theta (p, batch), lags (n,
+    batch))`, row `(y_t (batch,), g_t (q,), g_t^T g_t)`."""
 
     def step(carry, row):
         theta, lags = carry
         y_t, g_t, gg = row
+        batch = y_t.shape[0]
         phi_y = -lags  # -y(t-1) .. -y(t-n), Eq. (3.8b)
         e = y_t - jnp.sum(phi_y * theta[:n], axis=0) - g_t @ theta[n:]  # Eq. (4.1b)
         phi = jnp.concatenate(
@@ -152,8 +219,7 @@ def normalised_gradient_time_major(
         lags = jnp.concatenate([y_t[None], lags[:-1]], axis=0)
         return (theta, lags), None
 
-    (theta, _), _ = lax.scan(step, (theta, lags), (y, g, g_norm2), unroll=unroll)
-    return theta.T
+    return step
 
 
 def normalised_gradient_batch(

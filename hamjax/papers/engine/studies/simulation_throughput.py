@@ -17,6 +17,7 @@ import time
 from pathlib import Path
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, PRNGKeyArray
@@ -48,12 +49,26 @@ SPLIT_CPU = True  # `hamjax study` exposes each core as a device first
 
 
 class BacklashPlantTrial(eqx.Module):
-    """One realisation: white Gaussian input of std `input_std` -> plant -> summaries."""
+    """One realisation: white Gaussian input of std `input_std` -> plant -> summaries.
 
-    plant: Hammerstein
+    The backlash width is static (a Python float, part of the compiled program), so
+    that the traced trial keeps concrete straight borders and the time-major scan
+    steps them as the play operator (`hamjax.simulation.time_major.is_play_operator`,
+    equal to `Backlash.step` bit for bit)."""
+
+    linear: DiscreteTransferFunction
     input_std: Float[Array, ""]
     n_samples: int = eqx.field(static=True)
+    width: float = eqx.field(static=True, default=0.5)
     unroll: int = eqx.field(static=True, default=1)
+
+    @property
+    def plant(self) -> Hammerstein:
+        # The borders are computed from the static width at trace time, so that
+        # under jit they stay concrete.
+        with jax.ensure_compile_time_eval():
+            backlash = Backlash.from_width(self.width)
+        return Hammerstein(backlash, self.linear)
 
     def _inputs(self, key: PRNGKeyArray) -> Float[Array, " time"]:
         return self.input_std * normal_blocks(key, self.n_samples)
@@ -76,14 +91,13 @@ def make_trial(
     *, n_samples: int, width: float = 0.5, input_std: float = 1.0, unroll: int = 1
 ) -> BacklashPlantTrial:
     """The trial of this study (also used by `benchmarks/benchmark_throughput.py`)."""
-    plant = Hammerstein(
-        Backlash.from_width(width),
-        DiscreteTransferFunction([0.0, 1.0, -2.0], [1.0, -1.5, 0.56]),
-    )
+    if not width >= 0:
+        raise ValueError(f"backlash width must be >= 0; got {width}")
     return BacklashPlantTrial(
-        plant=plant,
+        linear=DiscreteTransferFunction([0.0, 1.0, -2.0], [1.0, -1.5, 0.56]),
         input_std=jnp.asarray(input_std, dtype=float),
         n_samples=n_samples,
+        width=float(width),
         unroll=unroll,
     )
 

@@ -74,12 +74,13 @@ from .attribute import (
     Attribution,
     Candidate,
     _params,
+    attribution,
+    gaps,
     rms,
 )
 from .augmented import NL_PIECEWISE
 from .layout import Prepared, best_row_per_class, finite_sse, validation_sse
 from .noise_fit import NOISE_MODELS, NOISE_PARAMETERS, noise_family_numpy
-from .residuals import noise_floor_hf
 
 
 ALPHA = 0.05  # family-wise false-alarm rate on `none` (module docstring)
@@ -264,21 +265,10 @@ def decide(prep: Prepared, fit: dict) -> Attribution:
             measure="one_step_prediction",
         )
     chosen = cands.get(effect) if effect != "none" else None
-    gap_before = rms(r_before)
-    if chosen is None:
-        gap_after = gap_before
-        floor = min(noise_floor_hf(r_before), gap_before)
-    elif chosen.measure == "one_step_prediction":
-        gap_after = floor = chosen.gap_after
-    else:
-        gap_after = chosen.gap_after
-        floor = min(noise_floor_hf(chosen.residual), gap_after)
-    denom = gap_before - floor
-    shrink = float((gap_before - gap_after) / denom) if denom > 0 else 0.0
-    if chosen is not None and chosen.measure == "one_step_prediction":
-        shrink = 1.0
-    elif chosen is not None and shrink < SHRINK_EXPLAINED:
-        effect = "unexplained"
+    gap = gaps(r_before, chosen)
+    if chosen is not None and chosen.measure == "simulation":
+        if gap[3] < SHRINK_EXPLAINED:
+            effect = "unexplained"
     tests = {
         "likelihood": {
             "alpha": ALPHA,
@@ -290,18 +280,6 @@ def decide(prep: Prepared, fit: dict) -> Attribution:
             "levels": {str(k): v for k, v in per_level.items()},
         }
     }
-    order = sorted(cands.values(), key=lambda c: c.gap_after)
-    if chosen is not None:
-        order = [chosen] + [c for c in order if c is not chosen]
-    return Attribution(
-        effect=effect,
-        gap_before=gap_before,
-        gap_after=float(gap_after),
-        noise_floor=float(floor),
-        shrink=shrink,
-        candidates=order,
-        chosen=chosen,
-        tests=tests,
-        r_before=r_before,
-        y_nominal=prep.w_val,
+    return attribution(
+        effect, chosen, list(cands.values()), tests, r_before, prep.w_val, gap
     )

@@ -142,6 +142,20 @@ def candidate_pairs(e_est: np.ndarray, n_est: int, p_d: list) -> list:
     return pairs
 
 
+def unit_root(model: str, values: np.ndarray, n: int) -> bool:
+    """Whether a fitted coloured model's largest AR pole $a$ lies within two
+    asymptotic standard errors $\\sqrt{(1 - a^2)/n}$ of 1: then it is the
+    random-walk level (ARMA(1,1) at $a = 1$, $c = \\alpha - 1$ is the local-level
+    predictor exactly), and its pair is `drift`, not `coloured_noise`."""
+    if model == "ar1" or model == "arma11":
+        a = float(values[0])
+    elif model == "ar2":
+        a = float(np.max(np.abs(np.roots([1.0, -values[0], -values[1]]))))
+    else:
+        return False
+    return bool(1 - a < 2 * np.sqrt(max(1 - a * a, 0.0) / n))
+
+
 def _noise_params(model: str, values: np.ndarray) -> dict:
     names = {
         "ar1": ("ar1_pole",),
@@ -187,8 +201,13 @@ def decide(prep: Prepared, fit: dict) -> Attribution:
     ll, s2 = pair_loglik(e_est, e_val, dof)
     total = ll.sum(axis=-1)  # (parts, models)
 
+    nominal_class = [
+        "drift" if unit_root(m, params[m][0], n_est) else NOISE_CLASS[m]
+        for m in NOISE_MODELS
+    ]
+
     def pair_class(i: int, j: int) -> str:
-        return NOISE_CLASS[NOISE_MODELS[j]] if i == 0 else parts[i][0]
+        return nominal_class[j] if i == 0 else parts[i][0]
 
     i_pm = next(i for i, x in enumerate(parts) if x[0] == "parameter_mismatch")
 
@@ -250,10 +269,13 @@ def decide(prep: Prepared, fit: dict) -> Attribution:
             params=_params(prep, fit, row, cls),
         )
     for cls in ("drift", "coloured_noise"):
-        j = max(
-            (j for j, m in enumerate(NOISE_MODELS) if NOISE_CLASS[m] == cls),
-            key=lambda j: total[0, j],
-        )
+        of_class = [j for j in range(1, len(NOISE_MODELS)) if nominal_class[j] == cls]
+        if named[0] == 0 and named[1] in of_class:
+            j = named[1]  # the named noise model itself
+        elif of_class:
+            j = max(of_class, key=lambda j: total[0, j])
+        else:
+            continue
         model = NOISE_MODELS[j]
         cands[cls] = Candidate(
             cls,

@@ -123,3 +123,16 @@ def test_threshold_bonferroni_and_rule_switch():
     assert set(RULES) == {"cascade", "likelihood"}
     with pytest.raises(ValueError, match="unknown rule"):
         diagnose_many([tiny_case(jr.key(0), "none")], rule="bayes")
+
+
+def test_cli_rule_option_offers_the_rules():
+    from hamjax.cli.main import build_parser
+
+    parser = build_parser(["diagnose"])
+    args = parser.parse_args(["diagnose", "c", "--out", "o", "--rule", "likelihood"])
+    assert args.rule == "likelihood"
+    assert parser.parse_args(["diagnose", "c", "--out", "o"]).rule == "cascade"
+    for rule in RULES:
+        assert parser.parse_args(["diagnose", "c", "--out", "o", "--rule", rule])
+    with pytest.raises(SystemExit):
+        parser.parse_args(["diagnose", "c", "--out", "o", "--rule", "bayes"])

@@ -69,7 +69,7 @@ best on both records, the unit-root reclassification), cascade -> this rule:
 family A realistic seed 0 / seed 100 / exact seed 100 **0.963 / 0.912 / 0.992 ->
 0.967 / 0.908 / 0.979** (false alarm on `none` 0/21, 1/15, 0/15 both rules);
 family B (held out, looked at once after the choices) seed 0 / seed 1
-**0.787 / 0.800 -> 0.738 / B1_PLACEHOLDER** (false alarm 0/17 both). Not better on B:
+**0.787 / 0.800 -> 0.738 / 0.738** (false alarm 0/17 both). Not better on B:
 the default stays the cascade.
 """
 

@@ -30,6 +30,14 @@ def register(sub) -> None:
         "(default: hamjax.diagnosis.layout.NOMINAL_UNCERTAINTY, 0.2)",
     )
     p.add_argument(
+        "--rule",
+        choices=("cascade", "likelihood"),
+        default="cascade",
+        help="the decision rule: 'cascade' (hamjax.diagnosis.attribute, the default) "
+        "or 'likelihood' (hamjax.diagnosis.decide: every candidate with its noise "
+        "model, judged by one held-out predictive log-likelihood)",
+    )
+    p.add_argument(
         "--force",
         action="store_true",
         help="replace the results of an earlier diagnosis in OUT",
@@ -166,6 +174,7 @@ def run(args: argparse.Namespace) -> int:
             diagnose_many(
                 items,
                 on_result=write,
+                rule=args.rule,
                 **prior,
             )
         except DiagnosisNotFinite as err:

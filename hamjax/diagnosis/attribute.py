@@ -155,6 +155,55 @@ def rms(x: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.square(x))))
 
 
+def gaps(r_before: np.ndarray, chosen: Candidate | None) -> tuple:
+    """`(gap_before, gap_after, noise_floor, shrink)` of the named candidate: the
+    floor is the upper-band white level of its residual (`noise_floor_hf`), the
+    one-step gap itself for a noise model; shrink the fraction of the gap above
+    the floor that it closes."""
+    gap_before = rms(r_before)
+    if chosen is None:
+        gap_after = gap_before
+        floor = min(noise_floor_hf(r_before), gap_before)
+    elif chosen.measure == "one_step_prediction":
+        gap_after = chosen.gap_after
+        floor = gap_after
+    else:
+        gap_after = chosen.gap_after
+        floor = min(noise_floor_hf(chosen.residual), gap_after)
+    denom = gap_before - floor
+    shrink = float((gap_before - gap_after) / denom) if denom > 0 else 0.0
+    return gap_before, gap_after, floor, shrink
+
+
+def attribution(
+    effect: str,
+    chosen: Candidate | None,
+    cands: list,
+    tests: dict,
+    r_before: np.ndarray,
+    y_nominal: np.ndarray,
+    gap: tuple,
+) -> Attribution:
+    """The `Attribution`, candidates ranked by gap after the named one; `gap` as
+    `gaps` returns it."""
+    gap_before, gap_after, floor, shrink = gap
+    order = sorted(cands, key=lambda c: c.gap_after)
+    if chosen is not None:
+        order = [chosen] + [c for c in order if c is not chosen]
+    return Attribution(
+        effect=effect,
+        gap_before=gap_before,
+        gap_after=float(gap_after),
+        noise_floor=float(floor),
+        shrink=shrink,
+        candidates=order,
+        chosen=chosen,
+        tests=tests,
+        r_before=r_before,
+        y_nominal=y_nominal,
+    )
+
+
 def _params(prep: Prepared, fit: dict, row: int, effect: str) -> dict:
     names = slot_names(N_MAX)
     phys = fit["params"][row]
@@ -339,18 +388,7 @@ def attribute(prep: Prepared, fit: dict) -> Attribution:
         noise_c, n_sig = noise_test()
         if n_sig:
             effect, chosen = noise_c.effect, noise_c
-    gap_before = rms(r_before)
-    if chosen is None:
-        gap_after = gap_before
-        floor = min(noise_floor_hf(r_before), gap_before)
-    elif chosen.measure == "one_step_prediction":
-        gap_after = chosen.gap_after
-        floor = gap_after
-    else:
-        gap_after = chosen.gap_after
-        floor = min(noise_floor_hf(chosen.residual), gap_after)
-    denom = gap_before - floor
-    shrink = float((gap_before - gap_after) / denom) if denom > 0 else 0.0
+    gap_before, gap_after, floor, shrink = gaps(r_before, chosen)
     if (
         chosen is not None
         and chosen.measure == "simulation"
@@ -373,18 +411,12 @@ def attribute(prep: Prepared, fit: dict) -> Attribution:
                 effect, chosen = noise_c.effect, noise_c
                 gap_after = floor = chosen.gap_after
                 shrink = 1.0
-    order = sorted(cands.values(), key=lambda c: c.gap_after)
-    if chosen is not None:
-        order = [chosen] + [c for c in order if c is not chosen]
-    return Attribution(
-        effect=effect,
-        gap_before=gap_before,
-        gap_after=float(gap_after),
-        noise_floor=float(floor),
-        shrink=shrink,
-        candidates=order,
-        chosen=chosen,
-        tests=tests,
-        r_before=r_before,
-        y_nominal=prep.w_val,
+    return attribution(
+        effect,
+        chosen,
+        list(cands.values()),
+        tests,
+        r_before,
+        prep.w_val,
+        (gap_before, gap_after, floor, shrink),
     )

@@ -11,6 +11,7 @@ import numpy as np
 
 from ..models import Hammerstein
 from .attribute import Attribution, attribute
+from .decide import decide
 from .layout import (
     NOMINAL_UNCERTAINTY,
     bucket,
@@ -67,6 +68,12 @@ def _not_finite(d: GapDiagnosis) -> str | None:
         if not np.all(np.isfinite(getattr(d, name))):
             return f"{name} has NaN or inf"
     return None
+
+
+# The decision rules: `attribute`'s cascade of tests (the default) and `decide`'s
+# one held-out likelihood for every candidate.
+RULES = {"cascade": attribute, "likelihood": decide}
+DEFAULT_RULE = "cascade"
 
 
 ONE_GROUP = 8192  # records up to this length share one padded length per call
@@ -161,6 +168,7 @@ def diagnose_many(
     cases_per_batch: int = CASES_PER_BATCH,
     on_result: Callable[[int, GapDiagnosis], None] | None = None,
     nominal_uncertainty: float | None = NOMINAL_UNCERTAINTY,
+    rule: str = DEFAULT_RULE,
 ) -> list[GapDiagnosis]:
     """Diagnose several cases: `(plant, dt, estimation, validation)` each, the records
     being `{"t", "v", "y"}` dicts of NumPy arrays.
@@ -172,7 +180,8 @@ def diagnose_many(
     split over the devices. Every re-fit of the nominal parameters is a
     maximum-a-posteriori fit under a Gaussian prior at nominal of relative std
     `nominal_uncertainty` (`layout.prior_weight`; None: a negligible prior).
-    `on_result(i, diagnosis)` is
+    `rule` names the decision (`RULES`: "cascade", `attribute.attribute`;
+    "likelihood", `decide.decide`). `on_result(i, diagnosis)` is
     called as soon as case `i` is done, so a caller can write each result while the
     others are still being fitted.
 
@@ -185,6 +194,9 @@ def diagnose_many(
             "the diagnosis needs float64: call hamjax.enable_x64() (or set "
             "JAX_ENABLE_X64=1) before the first JAX computation"
         )
+    if rule not in RULES:
+        raise ValueError(f"unknown rule {rule!r}: one of {sorted(RULES)}")
+    name_effect = RULES[rule]
     lengths = [max(est["v"].shape[0], val["v"].shape[0]) for *_, est, val in items]
     kinds = [describe_nominal(plant).nl_kind for plant, *_ in items]
     groups = defaultdict(list)
@@ -209,7 +221,7 @@ def diagnose_many(
 
         def finished(j: int, fit: dict, preps=preps, members=members) -> None:
             i = members[j]
-            out[i] = _result(preps[j], attribute(preps[j], fit), items[i][3])
+            out[i] = _result(preps[j], name_effect(preps[j], fit), items[i][3])
             bad = _not_finite(out[i])
             if bad is not None:
                 raise DiagnosisNotFinite(i, bad)
@@ -227,6 +239,7 @@ def diagnose_gap(
     validation: dict,
     *,
     nominal_uncertainty: float | None = NOMINAL_UNCERTAINTY,
+    rule: str = DEFAULT_RULE,
 ) -> GapDiagnosis:
     """Diagnose the gap between `plant` (the nominal model) and two records.
 
@@ -240,9 +253,12 @@ def diagnose_gap(
 
     - `nominal_uncertainty`: relative std of the nominal parameters (the prior of
       every re-fit; default 0.2).
+    - `rule`: the decision rule, "cascade" (default) or "likelihood" (`RULES`).
 
     **Returns:** a `GapDiagnosis` (the contract's fields and the figure data).
     """
     return diagnose_many(
-        [(plant, dt, estimation, validation)], nominal_uncertainty=nominal_uncertainty
+        [(plant, dt, estimation, validation)],
+        nominal_uncertainty=nominal_uncertainty,
+        rule=rule,
     )[0]

@@ -1,10 +1,20 @@
 """Fit the two noise-model effects (`drift`, `coloured_noise`) on the estimation
-residual and score them by one-step-ahead prediction on the validation residual."""
+residual and score them by one-step-ahead prediction on the validation residual.
 
+`fit_noise_family` fits the whole family of noise models of the one-likelihood
+rule (`decide`): white, AR(1), AR(2), ARMA(1,1) and a local level (a random-walk
+level seen through its steady-state Kalman predictor), each by prediction error
+on one candidate's estimation residual, and returns the one-step-ahead
+innovations on both records.
+"""
+
+import functools as ft
 import threading
 from collections.abc import Iterable
 
 import equinox as eqx
+import jax
+import jax.lax as lax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
@@ -56,6 +66,136 @@ def noise_fit_numpy(r_est: np.ndarray, r_val: np.ndarray) -> dict:
         "coloured_noise": (float(f.ar1_pole), np.asarray(f.ar1_errors)[:k]),
         "drift": (float(f.level_alpha), np.asarray(f.level_errors)[:k]),
     }
+
+
+# The noise models of `fit_noise_family`, in its output order, and how many
+# parameters each fits (the degrees of freedom taken from its innovation variance).
+NOISE_MODELS = ("white", "ar1", "ar2", "arma11", "level")
+NOISE_PARAMETERS = {"white": 0, "ar1": 1, "ar2": 2, "arma11": 2, "level": 1}
+# The MA coefficient c of ARMA(1,1) is fitted on this grid (|c| < 1: invertible),
+# its AR pole by least squares given c.
+MA_GRID = 39
+
+
+def _lagged(x: Float[Array, " L"], k: int) -> Float[Array, " L"]:
+    return jnp.concatenate([jnp.zeros(k, x.dtype), x[:-k]])
+
+
+def _ar2(r: Float[Array, " L"], mask: Float[Array, " L"]) -> Float[Array, " 2"]:
+    """Least-squares AR(2) coefficients (masked normal equations)."""
+    x = jnp.stack([_lagged(r, 1), _lagged(r, 2)], axis=1) * mask[:, None]
+    g = x.T @ x + 1e-300 * jnp.eye(2)
+    return jnp.linalg.solve(g, x.T @ (mask * r))
+
+
+def _inverse_ma(r: Float[Array, " L"], c: Float[Array, ""]) -> Float[Array, " L"]:
+    """$\\tilde r = r / (1 + c q^{-1})$, from rest."""
+
+    def step(prev, rk):
+        out = rk - c * prev
+        return out, out
+
+    return lax.scan(step, jnp.zeros((), r.dtype), r)[1]
+
+
+def _arma11(
+    r: Float[Array, " L"], mask: Float[Array, " L"]
+) -> tuple[Float[Array, ""], Float[Array, ""]]:
+    """ARMA(1,1) $r_k = a r_{k-1} + e_k + c e_{k-1}$ by prediction error: for each
+    $c$ on the grid the innovations $e = (1 - a q^{-1})\\tilde r$ are linear in
+    $a$ (least squares, $|a| \\le 0.999$); the pair of least masked SSE."""
+    cs = jnp.linspace(-0.95, 0.95, MA_GRID)
+
+    def one(c):
+        rt = _inverse_ma(r, c)
+        prev = _lagged(rt, 1)
+        a = jnp.sum(mask * rt * prev) / jnp.maximum(jnp.sum(mask * prev**2), 1e-300)
+        a = jnp.clip(a, -0.999, 0.999)
+        return a, jnp.sum(mask * (rt - a * prev) ** 2)
+
+    a, sse = jax.vmap(one)(cs)
+    k = jnp.argmin(sse)
+    return a[k], cs[k]
+
+
+def _family_errors(r, a1, a2, arma, alpha):
+    """One-step-ahead innovations of every model of `NOISE_MODELS` on `r`."""
+    ar2 = r - a2[0] * _lagged(r, 1) - a2[1] * _lagged(r, 2)
+    rt = _inverse_ma(r, arma[1])
+    return jnp.stack(
+        [
+            r,
+            ar1_errors(r, a1),
+            ar2,
+            rt - arma[0] * _lagged(rt, 1),
+            local_level_errors(r, alpha),
+        ]
+    )
+
+
+class NoiseFamily(eqx.Module):
+    """Every noise model of `NOISE_MODELS` fitted on one estimation residual."""
+
+    ar1_pole: Float[Array, ""]
+    ar2: Float[Array, " 2"]
+    arma11: Float[Array, " 2"]  # (a, c)
+    level_alpha: Float[Array, ""]
+    e_est: Float[Array, "5 L"]  # innovations on the estimation record
+    e_val: Float[Array, "5 L"]  # and on the validation record
+
+
+@eqx.filter_jit
+@ft.partial(jax.vmap, in_axes=(0, None, 0))
+def fit_noise_family(
+    r_est: Float[Array, " L"],
+    m_est: Float[Array, " L"],
+    r_val: Float[Array, " L"],
+) -> NoiseFamily:
+    """The models of `NOISE_MODELS` fitted on each row of `r_est` (masked by
+    `m_est`) by prediction error, their innovations on `r_est` and `r_val`."""
+    a1 = fit_ar1(r_est, m_est)
+    a2 = _ar2(r_est, m_est)
+    arma = jnp.stack(_arma11(r_est, m_est))
+    alpha = fit_local_level(r_est, m_est)
+    return NoiseFamily(
+        a1,
+        a2,
+        arma,
+        alpha,
+        _family_errors(r_est, a1, a2, arma, alpha),
+        _family_errors(r_val, a1, a2, arma, alpha),
+    )
+
+
+def noise_family_numpy(
+    r_est: np.ndarray, r_val: np.ndarray
+) -> tuple[dict, np.ndarray, np.ndarray]:
+    """`fit_noise_family` on unpadded NumPy residuals `(rows, n_est)` and
+    `(rows, n_val)` (padded to the record buckets and to a multiple of 8 rows):
+    `(parameters per model, e_est (rows, 5, n_est), e_val (rows, 5, n_val))`."""
+    rows, n_e = r_est.shape
+    n_v = r_val.shape[1]
+    n = bucket(max(n_e, n_v))
+    padded = -(-rows // 8) * 8
+    pe = np.zeros((padded, n))
+    pe[:rows, :n_e] = r_est
+    pv = np.zeros((padded, n))
+    pv[:rows, :n_v] = r_val
+    me = np.zeros(n)
+    me[:n_e] = 1.0
+    f = fit_noise_family(jnp.asarray(pe), jnp.asarray(me), jnp.asarray(pv))
+    params = {
+        "white": np.zeros((rows, 0)),
+        "ar1": np.asarray(f.ar1_pole)[:rows, None],
+        "ar2": np.asarray(f.ar2)[:rows],
+        "arma11": np.asarray(f.arma11)[:rows],
+        "level": np.asarray(f.level_alpha)[:rows, None],
+    }
+    return (
+        params,
+        np.asarray(f.e_est)[:rows, :, :n_e],
+        np.asarray(f.e_val)[:rows, :, :n_v],
+    )
 
 
 def compile_in_background(lengths: Iterable[int]) -> threading.Thread:

@@ -3,7 +3,7 @@
 Question: `hamjax diagnose` compiles one batched Levenberg-Marquardt program per call
 (`hamjax.diagnosis.fit`); for a single case that compilation is most of the wall
 time. How much compile time do XLA's CPU options save
-(`fit.COMPILER_OPTIONS`, against XLA's defaults), and what does each cost in run
+(`fit.PROGRAMS.compiler_options`, against XLA's defaults), and what does each cost in run
 time, for one case and for many cases in one call? Do the diagnoses stay the same?
 
 Every configuration runs as its own fresh `hamjax diagnose` process (the on-disk
@@ -48,11 +48,11 @@ def child(config: str, cases: list[str], out: str) -> None:
 
     extra = CONFIGS[config]
     if extra == {}:
-        fit.COMPILER_OPTIONS = {}
+        fit.PROGRAMS.compiler_options = {}
     elif extra is not None:
-        fit.COMPILER_OPTIONS = {**fit.COMPILER_OPTIONS, **extra}
+        fit.PROGRAMS.compiler_options = {**fit.PROGRAMS.compiler_options, **extra}
     times = {"lower": 0.0, "compile": 0.0}
-    lower, compile_ = fit._PROGRAMS["sharded"].lower, fit._compile
+    lower, compile_ = fit.PROGRAMS.programs["sharded"].lower, fit.PROGRAMS._compile
 
     class Timed:
         def lower(self, *args, **kwargs):
@@ -67,8 +67,8 @@ def child(config: str, cases: list[str], out: str) -> None:
         times["compile"] += time.perf_counter() - t
         return out
 
-    fit._PROGRAMS["sharded"] = Timed()
-    fit._compile = timed_compile
+    fit.PROGRAMS.programs["sharded"] = Timed()
+    fit.PROGRAMS._compile = timed_compile
     t_import = time.perf_counter() - t_start
     status = main(["diagnose", *cases, "--out", out])
     times.update(import_=t_import, status=status)

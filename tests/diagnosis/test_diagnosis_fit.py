@@ -306,7 +306,8 @@ def test_static_flags_give_the_run_time_decision():
 
 @pytest.mark.slow
 def test_compiler_options_change_only_rounding(monkeypatch):
-    # `fit.COMPILER_OPTIONS` (XLA's older CPU loop emitters: a faster compile) and
+    # `fit.PROGRAMS.compiler_options` (XLA's older CPU loop emitters: a faster
+    # compile) and
     # XLA's defaults compile the same program: same fits to rounding.
     prep = prepare(*tiny_case(jr.key(7), "dead_zone", noise=1e-3))
     n = len(prep.rows)
@@ -314,31 +315,32 @@ def test_compiler_options_change_only_rounding(monkeypatch):
     cases = _stack([prep.arrays] * n)
 
     def fit():
-        monkeypatch.setattr(fit_module, "_EXECUTABLES", {})  # compile again
+        fit_module.clear_compiled()  # compile again
         out = fit_batch(rows, cases, np.full(n, 15), np.full(n, LAMBDA0))
         return np.asarray(out.sse_est), np.asarray(out.theta)
 
-    assert fit_module.COMPILER_OPTIONS  # the shipped options are in use
+    assert fit_module.PROGRAMS.compiler_options  # the shipped options are in use
     sse, theta = fit()
-    monkeypatch.setattr(fit_module, "COMPILER_OPTIONS", {})
+    monkeypatch.setattr(fit_module.PROGRAMS, "compiler_options", {})
     sse_default, theta_default = fit()
     np.testing.assert_allclose(sse, sse_default, rtol=1e-9)
     np.testing.assert_allclose(theta, theta_default, rtol=1e-6, atol=1e-9)
 
 
-def test_unknown_compiler_option_falls_back_to_the_defaults(monkeypatch):
-    # An XLA that does not know an option compiles with its defaults; any other
-    # compile error is raised.
-    lowered = jax.jit(lambda x: 2.0 * x).lower(jnp.ones(3))
-    monkeypatch.setattr(fit_module, "COMPILER_OPTIONS", {"xla_no_such_option": 1})
-    np.testing.assert_array_equal(fit_module._compile(lowered)(jnp.ones(3)), 2.0)
-
-    class Broken:
-        def compile(self, **kwargs):
-            raise RuntimeError("out of memory")
-
-    with pytest.raises(RuntimeError, match="out of memory"):
-        fit_module._compile(Broken())
+def test_clear_compiled_drops_the_programs():
+    # `fit.clear_compiled()` (used by tests/conftest.py between modules) empties
+    # the cache, and the next call compiles again with the same result.
+    prep = prepare(*tiny_case(jr.key(8), "extra_pole", noise=1e-3))
+    n = len(prep.rows)
+    rows = _stack([r for _, r in prep.rows])
+    cases = _stack([prep.arrays] * n)
+    first = fit_batch(rows, cases, np.full(n, 3), np.full(n, LAMBDA0))
+    assert len(fit_module.PROGRAMS) >= 1
+    fit_module.clear_compiled()
+    assert len(fit_module.PROGRAMS) == 0
+    again = fit_batch(rows, cases, np.full(n, 3), np.full(n, LAMBDA0))
+    assert len(fit_module.PROGRAMS) == 1
+    np.testing.assert_array_equal(np.asarray(first.theta), np.asarray(again.theta))
 
 
 @pytest.mark.parametrize("kind", ["discrete", "continuous"])

@@ -35,7 +35,7 @@ from pathlib import Path
 HERE = Path(__file__).resolve()
 CONFIGS = {
     "xla-defaults": {},
-    "hamjax": None,  # fit.COMPILER_OPTIONS as shipped
+    "hamjax": None,  # fit.PROGRAMS.compiler_options as shipped
     "hamjax+opt0": {"xla_backend_optimization_level": 0},  # added to the shipped
 }
 
@@ -145,7 +145,7 @@ def main(argv: list[str] | None = None) -> int:
         "command": " ".join([Path(sys.argv[0]).name, *sys.argv[1:]]),
         "machine": {"cpus": os.cpu_count(), "platform": platform.platform()},
         "configs": {
-            c: (v if v is not None else "fit.COMPILER_OPTIONS")
+            c: (v if v is not None else "fit.PROGRAMS.compiler_options")
             for c, v in CONFIGS.items()
         },
     }

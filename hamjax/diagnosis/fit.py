@@ -23,8 +23,8 @@ from ..fitting import (
     GaussianPrior,
     NormalEquations,
     least_squares,
+    standard_errors_from_information,
 )
-from ..fitting.information import standard_errors_jit
 from ..fitting.least_squares import LAMBDA0
 from .augmented import (
     EFFECT_SLOTS,
@@ -239,15 +239,13 @@ def theta_std(
     jtj: Float[np.ndarray, "P P"], s2: float, used: np.ndarray
 ) -> Float[np.ndarray, " P"]:
     """Gauss-Newton standard errors of `theta` over the used slots (unused: 0):
-    `fitting.standard_errors_from_information` of $J^T J$ with variance $s^2$,
-    an unidentifiable direction infinite (`singular="infinite"`)."""
-    return np.asarray(
-        standard_errors_jit(
-            np.asarray(jtj, dtype=float),
-            variance=float(s2),
-            used=np.asarray(used, dtype=bool),
-            singular="infinite",
-        )
+    `fitting.standard_errors_from_information` of $J^T J$ with variance $s^2$ on
+    the host, an unidentifiable direction infinite (`singular="infinite"`)."""
+    return standard_errors_from_information(
+        np.asarray(jtj, dtype=float),
+        variance=float(s2),
+        used=np.asarray(used, dtype=bool),
+        singular="infinite",
     )
 
 

@@ -140,14 +140,20 @@ def _spd(seed, n=5):
     return X.T @ X
 
 
-def test_both_treatments_equal_the_inverse_when_regular():
+# the routine runs on NumPy arrays (host, no compilation) and on JAX arrays
+ARRAYS = pytest.mark.parametrize("to", [np.asarray, jnp.asarray], ids=["np", "jax"])
+
+
+@ARRAYS
+def test_both_treatments_equal_the_inverse_when_regular(to):
     # A regular information matrix: both treatments give D I^-1 D^T (NumPy's
     # inverse as the reference, to the matrix's condition times rounding).
-    info = _spd(0)
-    D = np.random.default_rng([0, 2]).normal(size=(2, 5))
+    info = to(_spd(0))
+    D = to(np.random.default_rng([0, 2]).normal(size=(2, 5)))
     want = D @ np.linalg.inv(info) @ D.T
     for singular in ("pseudo-inverse", "infinite"):
         got = covariance_from_information(info, jacobian=D, singular=singular)
+        assert isinstance(got, np.ndarray) == isinstance(info, np.ndarray)
         np.testing.assert_allclose(got, want, rtol=1e-8)
         std = standard_errors_from_information(info, variance=2.0, singular=singular)
         np.testing.assert_allclose(
@@ -155,7 +161,8 @@ def test_both_treatments_equal_the_inverse_when_regular():
         )
 
 
-def test_singular_directions_nan_or_infinite():
+@ARRAYS
+def test_singular_directions_nan_or_infinite(to):
     # Entries 3 and 4 enter only through their sum: that sum is identified
     # (pseudo-inverse: finite, equal to the bound of the reduced problem), each
     # alone is not (NaN); the diagnosis's treatment makes every used entry
@@ -163,16 +170,16 @@ def test_singular_directions_nan_or_infinite():
     rng = np.random.default_rng([1, 3])
     X = rng.normal(size=(40, 4))
     Xs = np.c_[X, X[:, 3]]  # column 4 = column 3
-    info = Xs.T @ Xs
+    info = to(Xs.T @ Xs)
     cov = np.asarray(covariance_from_information(info, singular="pseudo-inverse"))
     assert np.all(np.isnan(cov[3:, :])) and np.all(np.isfinite(cov[:3, :3]))
     reduced = np.linalg.inv(X.T @ X)
     np.testing.assert_allclose(cov[:3, :3], reduced[:3, :3], rtol=1e-8)
-    D = np.array([[0, 0, 0, 1.0, 1.0]])
+    D = to(np.array([[0, 0, 0, 1.0, 1.0]]))
     summed = covariance_from_information(info, jacobian=D, singular="pseudo-inverse")
     np.testing.assert_allclose(summed[0, 0], reduced[3, 3], rtol=1e-6)
-    bad = np.diag([1.0, 1.0, 1.0, -1.0, 0.0])  # indefinite; entry 4 is padding
-    used = np.array([True, True, True, True, False])
+    bad = to(np.diag([1.0, 1.0, 1.0, -1.0, 0.0]))  # indefinite; 4 is padding
+    used = to(np.array([True, True, True, True, False]))
     std = np.asarray(
         standard_errors_from_information(bad, used=used, singular="infinite")
     )

@@ -3,7 +3,7 @@
 Question: `hamjax diagnose` compiles one batched Levenberg-Marquardt program per call
 (`hamjax.diagnosis.fit`); for a single case that compilation is most of the wall
 time. How much compile time do XLA's CPU options save
-(`fit.COMPILER_OPTIONS`, against XLA's defaults), and what does each cost in run
+(`fit.PROGRAMS.compiler_options`, against XLA's defaults), and what does each cost in run
 time, for one case and for many cases in one call? Do the diagnoses stay the same?
 
 Every configuration runs as its own fresh `hamjax diagnose` process (the on-disk
@@ -35,7 +35,7 @@ from pathlib import Path
 HERE = Path(__file__).resolve()
 CONFIGS = {
     "xla-defaults": {},
-    "hamjax": None,  # fit.COMPILER_OPTIONS as shipped
+    "hamjax": None,  # fit.PROGRAMS.compiler_options as shipped
     "hamjax+opt0": {"xla_backend_optimization_level": 0},  # added to the shipped
 }
 
@@ -48,11 +48,11 @@ def child(config: str, cases: list[str], out: str) -> None:
 
     extra = CONFIGS[config]
     if extra == {}:
-        fit.COMPILER_OPTIONS = {}
+        fit.PROGRAMS.compiler_options = {}
     elif extra is not None:
-        fit.COMPILER_OPTIONS = {**fit.COMPILER_OPTIONS, **extra}
+        fit.PROGRAMS.compiler_options = {**fit.PROGRAMS.compiler_options, **extra}
     times = {"lower": 0.0, "compile": 0.0}
-    lower, compile_ = fit._PROGRAMS["sharded"].lower, fit._compile
+    lower, compile_ = fit.PROGRAMS.programs["sharded"].lower, fit.PROGRAMS._compile
 
     class Timed:
         def lower(self, *args, **kwargs):
@@ -67,8 +67,8 @@ def child(config: str, cases: list[str], out: str) -> None:
         times["compile"] += time.perf_counter() - t
         return out
 
-    fit._PROGRAMS["sharded"] = Timed()
-    fit._compile = timed_compile
+    fit.PROGRAMS.programs["sharded"] = Timed()
+    fit.PROGRAMS._compile = timed_compile
     t_import = time.perf_counter() - t_start
     status = main(["diagnose", *cases, "--out", out])
     times.update(import_=t_import, status=status)
@@ -145,7 +145,7 @@ def main(argv: list[str] | None = None) -> int:
         "command": " ".join([Path(sys.argv[0]).name, *sys.argv[1:]]),
         "machine": {"cpus": os.cpu_count(), "platform": platform.platform()},
         "configs": {
-            c: (v if v is not None else "fit.COMPILER_OPTIONS")
+            c: (v if v is not None else "fit.PROGRAMS.compiler_options")
             for c, v in CONFIGS.items()
         },
     }

@@ -117,6 +117,6 @@ def _fresh_compiled_programs():
 
     from hamjax.diagnosis import fit
 
-    fit._EXECUTABLES.clear()
+    fit.clear_compiled()
     jax.clear_caches()
     gc.collect()

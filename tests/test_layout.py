@@ -16,16 +16,17 @@ PACKAGE = Path(__file__).resolve().parents[1] / "hamjax"
 # Each top-level part of hamjax and the parts it may import (besides itself and
 # the private modules `hamjax._*`). Lower layers first.
 _CORE = {"models", "simulation", "signals"}
-_PROCEDURES = _CORE | {"io", "identification", "refinement", "diagnosis"}
+_PROCEDURES = _CORE | {"io", "identification", "fitting", "refinement", "diagnosis"}
 ALLOWED = {
     "models": set(),
     "simulation": {"models"},
     "signals": {"models", "simulation"},
     "io": _CORE,
     "identification": _CORE,
-    "refinement": _CORE | {"identification"},
+    "fitting": _CORE,
+    "refinement": _CORE | {"identification", "fitting"},
     "montecarlo": _CORE | {"io"},
-    "diagnosis": _CORE | {"io", "refinement"},
+    "diagnosis": _CORE | {"io", "fitting", "refinement"},
     "plotting": _CORE | {"io", "identification", "diagnosis"},
     "papers": _PROCEDURES | {"montecarlo", "plotting"},
     "demo": _PROCEDURES | {"plotting", "papers"},

@@ -1,6 +1,9 @@
-"""Least-squares fit of candidate rows on the estimation record (Levenberg-Marquardt),
-batched over a flat list of rows (each with its own case) so that one compilation
-serves every batch of a call; `schedule.py` decides which rows go into a batch."""
+"""Least-squares fit of candidate rows on the estimation record, batched over a flat
+list of rows (each with its own case) so that one compilation serves every batch
+of a call; `schedule.py` decides which rows go into a batch. The solver is the
+fitting layer's (`fitting.least_squares` with `BatchedLevenbergMarquardt`, the
+same interface and `RESULTS` as `refine`'s optimistix solvers); this module gives
+it the rows' blocked normal equations and the compiled batch programs."""
 
 import functools as ft
 from collections.abc import Callable
@@ -13,8 +16,16 @@ import numpy as np
 from jax.sharding import Mesh, PartitionSpec
 from jaxtyping import Array, Bool, Float, Int
 
-from .._linalg import cholesky_solve
 from .._results import RESULTS
+from ..fitting import (
+    BatchedLevenbergMarquardt,
+    CompiledPrograms,
+    GaussianPrior,
+    NormalEquations,
+    least_squares,
+    standard_errors_from_information,
+)
+from ..fitting.least_squares import LAMBDA0
 from .augmented import (
     EFFECT_SLOTS,
     NOMINAL_SLOTS,
@@ -36,8 +47,6 @@ from .augmented import (
 from .effects.time_delay import delay
 
 
-LAMBDA0 = 1e-3  # initial Levenberg-Marquardt damping
-LAMBDA_CONVERGED = 1e-2  # largest damping at which a small decrease is convergence
 BLOCK = 256  # samples per block of `normal_equations`
 
 
@@ -162,79 +171,31 @@ def _normal_equations(theta, row, case, flags):
     return (sse, H, g), (p, b, a)
 
 
-def levenberg_marquardt(theta0, lam0, args, max_steps):
-    """Levenberg-Marquardt with Marquardt's diagonal scaling, forward-mode Jacobian.
+def _row_problem(theta, args):
+    """The row's normal equations, for `fitting.least_squares`; `args = (row,
+    case, (memory, table, feedback))`."""
+    row, case, flags = args
+    return _normal_equations(theta, row, case, flags)
 
-    Hand-rolled rather than `optx.LevenbergMarquardt`: under `vmap` over ~20
-    candidate rows the optimistix solver cost 17 s per case (and 80 s to
-    compile) against ~3 s here, for the same damped Gauss-Newton iteration. It
-    works on the normal equations (`normal_equations`) plus a Gaussian prior at
-    the nominal parameters, of weight `case.prior_weight` (`layout.prior_weight`:
-    the user's stated nominal uncertainty, so the cost is the negative log
-    posterior times the noise variance): a re-fit explains only what the stated
-    uncertainty makes plausible, and where the estimation record leaves a
-    direction of the re-fit undetermined (the gain against the slopes of a
-    piecewise-linear map, an unexcited segment) every start ends at the same
-    point instead of wherever its path stopped.
 
-    One call site of the model keeps the compilation small: each iteration
-    evaluates the trial point, accepts it if the cost fell, then proposes the
-    next trial from the accepted point. The first iteration accepts `theta0` and
-    divides `lam0` by 3, so a fit stopped with damping `lam` continues seamlessly
-    from `lam0 = 3 lam`. Returns `(theta, sse, JtJ, converged, lam, steps)`, the
-    last three of the record part only (scaled output).
-    """
-    row, case, memory, table, feedback = args
-    P = theta0.shape[0]
-    mask = nominal_mask(row, case)
-
-    def cond(state):
-        return (state[-2] < max_steps) & ~state[-1]
-
-    def body(state):
-        theta, trial, sse, H, g, coef, cost, lam, k, _ = state
-        (sse_n, H_n, g_n), coef_n = _normal_equations(
-            trial, row, case, (memory, table, feedback)
-        )
-        prior = case.prior_weight
-        cost_n = sse_n + prior * jnp.sum(jnp.where(mask, trial, 0.0) ** 2)
-        better = cost_n < cost
-        # A small decrease counts as convergence only for a nearly undamped step:
-        # under heavy damping the step is short, so the decrease is small whatever
-        # the distance to the minimum (seen stopping fits halfway along a valley).
-        small = ((cost - cost_n) <= 1e-10 * cost_n) & (lam <= LAMBDA_CONVERGED)
-        theta, sse, H, g, coef = jax.tree.map(
-            lambda a, b: jnp.where(better, a, b),
-            (trial, sse_n, H_n, g_n, coef_n),
-            (theta, sse, H, g, coef),
-        )
-        cost_new = jnp.where(better, cost_n, cost)
-        lam = jnp.where(better, lam / 3, lam * 4)
-        Hp = H + prior * jnp.diag(mask.astype(theta.dtype))
-        gp = g + prior * jnp.where(mask, theta, 0.0)
-        d = jnp.diag(Hp) + 1e-12
-        step = -cholesky_solve(Hp + lam * jnp.diag(d), gp)
-        done = (better & small) | (lam > 1e10) | (jnp.max(jnp.abs(step)) < 1e-12)
-        return theta, theta + step, sse, H, g, coef, cost_new, lam, k + 1, done
-
-    state = (
-        theta0,
-        theta0,
-        jnp.zeros((), theta0.dtype),
-        jnp.zeros((P, P), theta0.dtype),
-        jnp.zeros(P, theta0.dtype),
-        (  # p, b, a (the extra lag adds one coefficient to each)
-            jnp.zeros(case.anchor.shape[0], theta0.dtype),
-            jnp.zeros(case.b_disc.shape[0] + 1, theta0.dtype),
-            jnp.zeros(case.b_disc.shape[0] + 1, theta0.dtype),
-        ),
-        jnp.asarray(jnp.inf),
-        jnp.asarray(lam0, dtype=theta0.dtype),
-        jnp.asarray(0, dtype=jnp.int32),
-        jnp.asarray(False),
+def _solve_row(row, case, flags, max_steps, lam0):
+    """`fitting.BatchedLevenbergMarquardt` on the row's normal equations plus a
+    Gaussian prior at the nominal parameters, of weight `case.prior_weight`
+    (`layout.prior_weight`: the user's stated nominal uncertainty, so the cost is
+    the negative log posterior times the noise variance): a re-fit explains only
+    what the stated uncertainty makes plausible, and where the estimation record
+    leaves a direction of the re-fit undetermined (the gain against the slopes of
+    a piecewise-linear map, an unexcited segment) every start ends at the same
+    point instead of wherever its path stopped."""
+    return least_squares(
+        NormalEquations(_row_problem),
+        BatchedLevenbergMarquardt(lam0=lam0),
+        row.theta0,
+        (row, case, flags),
+        max_steps=max_steps,
+        prior=GaussianPrior(case.prior_weight, nominal_mask(row, case)),
+        throw=False,
     )
-    theta, _, sse, H, _, coef, _, lam, k, done = lax.while_loop(cond, body, state)
-    return theta, sse, H, coef, done, lam, k
 
 
 def fit_row(
@@ -251,13 +212,12 @@ def fit_row(
     (False only if the row frees neither the rate limit nor the backlash and the
     case's map is not a backlash, if the map reads no table (`uses_table`), and if
     the row frees no feedback slot)."""
-    theta, sse, jtj, (p, b, a), done, lam, k = levenberg_marquardt(
-        row.theta0, lam0, (row, case, memory, table, feedback), max_steps
-    )
+    flags = (memory, table, feedback)
+    sol = _solve_row(row, case, flags, max_steps, lam0)
+    theta, (p, b, a), sse = sol.value, sol.aux, sol.stats["sse"]
     n = jnp.sum(case.m_est)
     used = row.idx < case.anchor.shape[0]
     dof = jnp.maximum(n - jnp.sum(used), 1.0)
-    flags = (memory, table, feedback)
     y_val = simulate_with_filter(p, b, a, row.tau, case.v_val, case, *flags)
     y_est = simulate_with_filter(p, b, a, row.tau, case.v_est, case, *flags)
     sse_est = sse * case.y_scale**2
@@ -267,10 +227,10 @@ def fit_row(
         sse_est=jnp.where(jnp.isfinite(sse_est), sse_est, jnp.inf),
         y_val=y_val,
         y_est=y_est,
-        result=RESULTS.where(done, RESULTS.successful, RESULTS.not_converged),
-        steps=k,
-        lam=lam,
-        jtj=jtj,
+        result=sol.result,
+        steps=sol.stats["num_steps"],
+        lam=sol.stats["damping"],
+        jtj=sol.stats["jtj"],
         s2=sse / dof,
     )
 
@@ -278,21 +238,15 @@ def fit_row(
 def theta_std(
     jtj: Float[np.ndarray, "P P"], s2: float, used: np.ndarray
 ) -> Float[np.ndarray, " P"]:
-    """Gauss-Newton standard errors of `theta` (NumPy, on the host): the square
-    roots of the diagonal of $s^2 (J^T J)^{-1}$ over the used slots. An
-    unidentifiable direction (a singular or indefinite information matrix, a pivot
-    lost to rounding) gets an infinite std; unused slots get 0."""
-    jtj = np.asarray(jtj, dtype=float)
-    used = np.asarray(used, dtype=bool)
-    reg = np.where(used, 1e-12 * (1.0 + np.diag(jtj)), 1.0)
-    try:
-        factor = np.linalg.cholesky(jtj + np.diag(reg))
-        inv = np.linalg.inv(factor)
-        var = np.sum(inv**2, axis=0) * s2
-    except np.linalg.LinAlgError:
-        var = np.full(jtj.shape[0], np.nan)
-    std = np.where(var >= 0, np.sqrt(np.abs(var)), np.inf)
-    return np.where(used, std, 0.0)
+    """Gauss-Newton standard errors of `theta` over the used slots (unused: 0):
+    `fitting.standard_errors_from_information` of $J^T J$ with variance $s^2$ on
+    the host, an unidentifiable direction infinite (`singular="infinite"`)."""
+    return standard_errors_from_information(
+        np.asarray(jtj, dtype=float),
+        variance=float(s2),
+        used=np.asarray(used, dtype=bool),
+        singular="infinite",
+    )
 
 
 @eqx.filter_jit
@@ -345,43 +299,24 @@ def _fit_flat_sharded(
     return fn(rows, cases, max_steps, lam0)
 
 
-_PROGRAMS = {
-    name: jax.jit(fn, static_argnames=("memory", "table", "feedback"))
-    for name, fn in (("one", _fit_flat), ("sharded", _fit_flat_sharded))
-}
-_EXECUTABLES: dict = {}
 # XLA's CPU back end compiles this program (~300 fusions, most of them small loop
 # bodies) about 40 % faster with its older loop emitters than with the fusion
 # emitters, and the batches run as fast (measured in
 # `benchmarks/diagnosis_compile_options.py`). An XLA without the option compiles
 # with its defaults.
 COMPILER_OPTIONS = {"xla_cpu_use_fusion_emitters": False}
+PROGRAMS = CompiledPrograms(
+    {
+        name: jax.jit(fn, static_argnames=("memory", "table", "feedback"))
+        for name, fn in (("one", _fit_flat), ("sharded", _fit_flat_sharded))
+    },
+    compiler_options=COMPILER_OPTIONS,
+)
 
 
-def _compile(lowered):
-    try:
-        return lowered.compile(compiler_options=COMPILER_OPTIONS)
-    except Exception as e:
-        if "No such compile option" not in str(e):
-            raise
-        return lowered.compile()
-
-
-def _executable(
-    kind: str, args: tuple, flags: dict, while_compiling: Callable[[], None] | None
-):
-    """The compiled fit program for these argument shapes and static flags, traced
-    and compiled ahead of time so that `while_compiling` runs between the two: XLA
-    releases the GIL while it compiles, tracing does not."""
-    leaves, tree = jax.tree.flatten(args)
-    key = (kind, tree, tuple((np.shape(x), np.dtype(x.dtype)) for x in leaves))
-    key += tuple(sorted(flags.items()))
-    if key not in _EXECUTABLES:
-        lowered = _PROGRAMS[kind].lower(*args, **flags)
-        if while_compiling is not None:
-            while_compiling()
-        _EXECUTABLES[key] = _compile(lowered)
-    return _EXECUTABLES[key]
+def clear_compiled() -> None:
+    """Drop the compiled fit programs (`fit_batch` compiles again on next use)."""
+    PROGRAMS.clear()
 
 
 def fit_batch(
@@ -418,4 +353,4 @@ def fit_batch(
     sharded = n_dev > 1 and rows.theta0.shape[0] % n_dev == 0
     flags = {"memory": memory, "table": table, "feedback": feedback}
     kind = "sharded" if sharded else "one"
-    return _executable(kind, args, flags, while_compiling)(*args)
+    return PROGRAMS.get(kind, args, flags, while_compiling)(*args)

@@ -16,7 +16,9 @@ $B/(A\\,(1 - q^{-1}))$ with $\\deg A \\in \\{1, 2\\}$, the same map choices, fit
 by the same output-error refinement on the increments $\\Delta y_k = y_k -
 y_{k-1}$ ($y_{-1} = 0$: the record starts from rest) with the integrator fixed;
 every candidate is then scored by BIC on the simulated $y$ itself, so the
-integrating and the stable structures compete on the same error.
+integrating and the stable structures compete on the same error (a stable
+candidate's output-error SSE is that error already; only the integrating ones,
+and a map whose dead zone had to be clipped, are simulated again).
 """
 
 import jax.tree_util as jtu
@@ -56,7 +58,9 @@ def _arx(v: np.ndarray, y: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
 
 def _fit_structure(dt, record, nl, b, a, n_params):
     """Output-error fit of `nl` then `B/A` (started at `b, a`) on `record`: the
-    fitted static map, the discrete block, and the parameter count."""
+    fitted static map, the discrete block, the parameter count, and the fit's SSE
+    on `record` when it is that of the returned model (None where the map's
+    dead zone was clipped to d1 >= 0 >= d2, or the fit did not see every sample)."""
     names = slot_names(N_MAX)
     start = Hammerstein(nl, DiscreteTransferFunction(b, a, dt))
     prep = prepare(start, dt, record, record, n_params=n_params)
@@ -68,14 +72,17 @@ def _fit_structure(dt, record, nl, b, a, n_params):
     den = np.r_[1.0, [p[names.index(f"den{j}")] for j in range(1, n + 1)]]
     gain = p[names.index("gain")]  # 1 beside a piecewise-linear map
     fitted = Identity()
+    sse = float(fit.sse_est[0])
+    exact = np.isfinite(sse) and np.sum(prep.arrays.m_est) == record["v"].shape[0]
     if isinstance(nl, PiecewiseLinear):
         vals = {
             s: float(p[names.index(s)]) for s in ("k1", "k2", "d1", "d2", "l1", "l2")
         }
+        exact = exact and vals["d1"] >= 0.0 >= vals["d2"]
         vals["d1"], vals["d2"] = max(vals["d1"], 0.0), min(vals["d2"], 0.0)
         fitted = PiecewiseLinear(**vals)
     k = (6 if isinstance(nl, PiecewiseLinear) else 1) + n + 1
-    return fitted, gain * b, den, k
+    return fitted, gain * b, den, k, (sse if exact else None)
 
 
 def _simulated_sse(plant: Hammerstein, record: dict, dt: float) -> float:
@@ -97,7 +104,9 @@ def fit_nominal(dt: float, estimation: dict) -> Hammerstein:
         for n in orders:
             b, a = _arx(v, record["y"], n)
             for nl in (PiecewiseLinear(k1=1.0, k2=1.0), Identity()):
-                fitted, b_fit, den, k = _fit_structure(dt, record, nl, b, a, n_params)
+                fitted, b_fit, den, k, sse = _fit_structure(
+                    dt, record, nl, b, a, n_params
+                )
                 if not (np.all(np.isfinite(den)) and np.all(np.isfinite(b_fit))):
                     continue
                 # the output-error fit does not constrain the poles: an unstable
@@ -108,7 +117,11 @@ def fit_nominal(dt: float, estimation: dict) -> Hammerstein:
                     den = np.convolve(den, [1.0, -1.0])
                     b_fit = np.r_[b_fit, 0.0]
                 plant = Hammerstein(fitted, DiscreteTransferFunction(b_fit, den, dt))
-                sse = _simulated_sse(plant, estimation, dt)
+                # a stable candidate's fit SSE is already its simulated SSE on
+                # y (same model, same record, from rest); an integrating one was
+                # fitted on the increments, so it is simulated on y here
+                if integrating or sse is None:
+                    sse = _simulated_sse(plant, estimation, dt)
                 bic = n_samples * np.log(max(sse, 1e-300) / n_samples) + k * np.log(
                     n_samples
                 )

@@ -7,7 +7,9 @@ normalisation (G(0) = 1, or $\\sum b_i^2 = 1$ of seed 001 (3.10)), so $I$ is
 invertible for an exciting input. The bound on reported parameters
 $\\phi(\\theta)$ is $D I^{+} D^\\top$, $D = \\partial\\phi/\\partial\\theta$, which is the
 bound for any $\\phi$ that the data identify (rows of $D$ in the row space of
-$I$) even when $I$ is singular; entries that are not identified are NaN.
+$I$) even when $I$ is singular; entries that are not identified are NaN
+(`fitting.covariance_from_information` with `singular="pseudo-inverse"`, the
+routine the diagnosis's standard errors use with their own treatment).
 """
 
 from collections.abc import Callable
@@ -18,6 +20,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
 from .._types import Params, Signal
+from ..fitting import covariance_from_information
 from ._parametrisation import AbstractParametrisation
 
 
@@ -77,19 +80,7 @@ def cramer_rao_bound(
 def _bound(parametrisation, theta, v, noise_std, phi):
     info = _fisher(parametrisation, theta, v, noise_std)
     D = jax.jacfwd(phi)(theta)
-    # Scale to unit diagonal first: the entries span many decades.
-    d = jnp.sqrt(jnp.diag(info))
-    d = jnp.where(d > 0, d, 1.0)
-    scaled = info / jnp.outer(d, d)
-    Ds = D / d[None, :]
-    eigval, eigvec = jnp.linalg.eigh(scaled)
-    keep = eigval > 1e-10 * jnp.max(eigval)
-    inv_val = jnp.where(keep, 1.0 / jnp.where(keep, eigval, 1.0), 0.0)
-    bound = (Ds @ eigvec) * inv_val[None, :] @ (Ds @ eigvec).T
-    # phi_i is identified iff its gradient has no component in the null space.
-    leak = jnp.linalg.norm((Ds @ eigvec) * (~keep)[None, :], axis=1)
-    ok = leak <= 1e-6 * jnp.maximum(jnp.linalg.norm(Ds, axis=1), 1e-300)
-    return jnp.where(ok[:, None] & ok[None, :], bound, jnp.nan)
+    return covariance_from_information(info, jacobian=D, singular="pseudo-inverse")
 
 
 def standard_errors(

@@ -3,8 +3,15 @@
 import equinox as eqx
 import optimistix as optx
 
+from ..fitting import BatchedLevenbergMarquardt
 
-_SOLVERS = ("levenberg-marquardt", "gauss-newton", "bfgs")
+
+_SOLVERS = (
+    "levenberg-marquardt",
+    "gauss-newton",
+    "bfgs",
+    "batched-levenberg-marquardt",
+)
 
 
 class RefinementOptions(eqx.Module):
@@ -14,7 +21,10 @@ class RefinementOptions(eqx.Module):
 
     - `solver`: `"levenberg-marquardt"` (default, robust to poor starts),
       `"gauss-newton"` (fast near the optimum) or `"bfgs"` (a minimiser of
-      $\\tfrac12\\|r\\|^2$, no Jacobian materialised).
+      $\\tfrac12\\|r\\|^2$, no Jacobian materialised), or
+      `"batched-levenberg-marquardt"` (`fitting.BatchedLevenbergMarquardt`, the
+      diagnosis's solver: cheap under `vmap`; it stops on a relative decrease of
+      `rtol` at low damping and ignores `atol`, its step tolerance is fixed).
     - `rtol`, `atol`: optimistix step/value tolerances.
     - `max_steps`: step budget; exceeding it is reported as `not_converged`.
     - `annealing`: smoothing widths used in turn before the exact fit, for
@@ -41,7 +51,9 @@ class RefinementOptions(eqx.Module):
             raise ValueError(f"annealing widths must be > 0; got {self.annealing}")
 
     def make_solver(self):
-        """The optimistix solver object these options describe."""
+        """The solver object these options describe (for `fitting.least_squares`)."""
+        if self.solver == "batched-levenberg-marquardt":
+            return BatchedLevenbergMarquardt(rtol=self.rtol)
         if self.solver == "levenberg-marquardt":
             return optx.LevenbergMarquardt(rtol=self.rtol, atol=self.atol)
         if self.solver == "gauss-newton":

@@ -2,7 +2,8 @@
 
 Starts from a closed-form estimate (seed 000's NBBI/FGI, seed 001's least
 squares (3.8)) and minimises $\\sum_k (y_k - \\hat w_k(\\theta))^2$ through the
-differentiable simulator with an optimistix least-squares solver.
+differentiable simulator with a least-squares solver (`fitting.least_squares`:
+an optimistix one by default, or the diagnosis's batched Levenberg-Marquardt).
 """
 
 import equinox as eqx
@@ -12,6 +13,7 @@ from jaxtyping import Array, ArrayLike, Float, Int
 
 from .._results import RESULTS
 from .._types import Params
+from ..fitting import least_squares
 from ._parametrisation import AbstractParametrisation
 from .options import RefinementOptions
 
@@ -25,7 +27,8 @@ class RefinementResult(eqx.Module):
       to a finite, admissible model; `not_converged` if the step budget ran out or
       the end point is inadmissible (`parametrisation.is_valid`, e.g. an unstable
       linear block); `nonfinite` if the fit diverged.
-    - `solver_result`: optimistix's own code.
+    - `solver_result`: the solver's own code (optimistix's, or the
+      `hamjax.RESULTS` of `fitting.BatchedLevenbergMarquardt`).
     - `steps`: solver steps taken (summed over annealing stages).
     - `rss`: residual sum of squares at the solution; `initial_rss` at the start.
     - `noise_variance`: $\\hat\\sigma^2 = \\text{rss}/(N - p)$.
@@ -34,7 +37,7 @@ class RefinementResult(eqx.Module):
     estimate: Float[Array, " n_physical"]
     theta: Params
     result: RESULTS
-    solver_result: optx.RESULTS
+    solver_result: optx.RESULTS | RESULTS
     steps: Int[Array, ""]
     rss: Float[Array, ""]
     initial_rss: Float[Array, ""]
@@ -50,12 +53,11 @@ def _residuals(theta, args):
 
 
 def _solve(parametrisation, theta0, v, y, options):
-    solver = options.make_solver()
-    return optx.least_squares(
+    return least_squares(
         _residuals,
-        solver,
+        options.make_solver(),
         theta0,
-        args=(parametrisation, v, y),
+        (parametrisation, v, y),
         max_steps=options.max_steps,
         throw=False,
     )
@@ -65,9 +67,7 @@ def _classify(solver_result, theta, parametrisation, rss) -> RESULTS:
     finite = jnp.all(jnp.isfinite(theta)) & jnp.isfinite(rss) & (rss < 1e200)
     # An inadmissible end point (unstable A or G, d2 > 0 ...) is a fit that did
     # not converge to a model of the class.
-    converged = (solver_result == optx.RESULTS.successful) & parametrisation.is_valid(
-        theta
-    )
+    converged = (solver_result == RESULTS.successful) & parametrisation.is_valid(theta)
     result = RESULTS.where(converged, RESULTS.successful, RESULTS.not_converged)
     return RESULTS.where(finite, result, RESULTS.nonfinite)
 
@@ -150,7 +150,7 @@ def refine(
         estimate=parametrisation.to_physical(theta),
         theta=theta,
         result=result,
-        solver_result=sol.result,
+        solver_result=sol.stats.get("solver_result", sol.result),
         steps=steps,
         rss=rss,
         initial_rss=initial_rss,

@@ -98,7 +98,7 @@ def _all_rows(prep, steps):
 @pytest.mark.slow
 def test_resumed_fit_is_the_uninterrupted_fit():
     # A fit stopped after 5 steps and resumed with its damping (lam0 = 3 lam, see
-    # `levenberg_marquardt`) retraces the uninterrupted fit: the resumed one only
+    # `fitting.BatchedLevenbergMarquardt`) retraces the uninterrupted fit: the resumed one only
     # re-evaluates its starting point once, so 5 + 31 steps reach the point of 35.
     # Rounding is the only difference (same arithmetic, other batch width).
     prep = prepare(*tiny_case(jr.key(3), "extra_pole", noise=1e-3))
@@ -306,7 +306,8 @@ def test_static_flags_give_the_run_time_decision():
 
 @pytest.mark.slow
 def test_compiler_options_change_only_rounding(monkeypatch):
-    # `fit.COMPILER_OPTIONS` (XLA's older CPU loop emitters: a faster compile) and
+    # `fit.PROGRAMS.compiler_options` (XLA's older CPU loop emitters: a faster
+    # compile) and
     # XLA's defaults compile the same program: same fits to rounding.
     prep = prepare(*tiny_case(jr.key(7), "dead_zone", noise=1e-3))
     n = len(prep.rows)
@@ -314,31 +315,31 @@ def test_compiler_options_change_only_rounding(monkeypatch):
     cases = _stack([prep.arrays] * n)
 
     def fit():
-        monkeypatch.setattr(fit_module, "_EXECUTABLES", {})  # compile again
+        fit_module.clear_compiled()  # compile again
         out = fit_batch(rows, cases, np.full(n, 15), np.full(n, LAMBDA0))
         return np.asarray(out.sse_est), np.asarray(out.theta)
 
-    assert fit_module.COMPILER_OPTIONS  # the shipped options are in use
+    assert fit_module.PROGRAMS.compiler_options  # the shipped options are in use
     sse, theta = fit()
-    monkeypatch.setattr(fit_module, "COMPILER_OPTIONS", {})
+    monkeypatch.setattr(fit_module.PROGRAMS, "compiler_options", {})
     sse_default, theta_default = fit()
     np.testing.assert_allclose(sse, sse_default, rtol=1e-9)
     np.testing.assert_allclose(theta, theta_default, rtol=1e-6, atol=1e-9)
 
 
-def test_unknown_compiler_option_falls_back_to_the_defaults(monkeypatch):
-    # An XLA that does not know an option compiles with its defaults; any other
-    # compile error is raised.
-    lowered = jax.jit(lambda x: 2.0 * x).lower(jnp.ones(3))
-    monkeypatch.setattr(fit_module, "COMPILER_OPTIONS", {"xla_no_such_option": 1})
-    np.testing.assert_array_equal(fit_module._compile(lowered)(jnp.ones(3)), 2.0)
-
-    class Broken:
-        def compile(self, **kwargs):
-            raise RuntimeError("out of memory")
-
-    with pytest.raises(RuntimeError, match="out of memory"):
-        fit_module._compile(Broken())
+def test_clear_compiled_drops_the_programs():
+    # `fit.clear_compiled()` (used by tests/conftest.py between modules) empties
+    # the cache, and the next call compiles again with the same result (to
+    # rounding: a fresh compilation may partition its loops differently, seen
+    # 7e-13 relative).
+    prep = prepare(*tiny_case(jr.key(8), "extra_pole", noise=1e-3))
+    first = _all_rows(prep, 3)
+    assert len(fit_module.PROGRAMS) >= 1
+    fit_module.clear_compiled()
+    assert len(fit_module.PROGRAMS) == 0
+    again = _all_rows(prep, 3)
+    assert len(fit_module.PROGRAMS) == 1
+    np.testing.assert_allclose(first["theta"], again["theta"], rtol=1e-9, atol=1e-12)
 
 
 @pytest.mark.parametrize("kind", ["discrete", "continuous"])

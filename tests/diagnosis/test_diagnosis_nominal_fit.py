@@ -96,3 +96,48 @@ def test_an_integrating_plant_gets_an_integrating_nominal():
     assert np.min(np.abs(roots - 1.0)) < 1e-12
     y_fit = scipy.signal.lfilter(fitted.linear.b, fitted.linear.a, v)
     assert _rms(y_fit - y) < 1e-6 * np.ptp(y)
+
+
+@pytest.mark.slow
+def test_stable_candidates_are_scored_by_their_fit_sse(monkeypatch):
+    # `fit_nominal` scores a stable candidate by the SSE its output-error fit
+    # already computed instead of simulating it again. That SSE must be the
+    # returned model's simulated SSE on y (reference: `hj.simulate`, not the fit's
+    # scan) to rounding, 1e-9 relative; and forcing the re-simulation of every
+    # candidate must pick the same nominal.
+    from hamjax.diagnosis import nominal_fit
+    from hamjax.diagnosis.layout import MAX_EFFECT_SLOTS, N_MAX
+
+    dt = 0.05
+    nl = hj.PiecewiseLinear(k1=1.5, k2=0.7, d1=0.2, d2=-0.3)
+    lin = hj.DiscreteTransferFunction([0.0, 0.2, 0.1], [1.0, -1.1, 0.4], dt)
+    v = staircase(jr.key(3), 600)
+    rec = _record(hj.Hammerstein(nl, lin), v, dt)
+    rec["y"] = rec["y"] + 0.02 * np.asarray(jr.normal(jr.key(4), v.shape))
+    n_params = N_MAX + 6 + MAX_EFFECT_SLOTS
+    checked = 0
+    for n in (1, 2):
+        b, a = nominal_fit._arx(v, rec["y"], n)
+        for start in (hj.PiecewiseLinear(k1=1.0, k2=1.0), hj.Identity()):
+            fitted, b_fit, den, _, sse = nominal_fit._fit_structure(
+                dt, rec, start, b, a, n_params
+            )
+            if sse is None:  # a clipped dead zone: simulated instead
+                continue
+            model = hj.Hammerstein(fitted, hj.DiscreteTransferFunction(b_fit, den, dt))
+            y_sim = np.asarray(hj.simulate(model, v, dt=dt))
+            want = float(np.sum(np.square(rec["y"] - y_sim)))
+            assert abs(sse - want) <= 1e-9 * want, (n, start, sse, want)
+            checked += 1
+    assert checked >= 2
+    chosen = fit_nominal(dt, rec)
+    original = nominal_fit._fit_structure
+    monkeypatch.setattr(
+        nominal_fit,
+        "_fit_structure",
+        lambda *args: (*original(*args)[:4], None),  # simulate every candidate
+    )
+    again = fit_nominal(dt, rec)
+    assert type(again.nonlinearity) is type(chosen.nonlinearity)
+    np.testing.assert_array_equal(np.asarray(again.linear.a), chosen.linear.a)
+    np.testing.assert_array_equal(np.asarray(again.linear.b), chosen.linear.b)

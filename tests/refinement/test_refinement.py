@@ -107,7 +107,9 @@ def test_normalisation_3_10_round_trip():
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("solver", ["levenberg-marquardt", "gauss-newton"])
+@pytest.mark.parametrize(
+    "solver", ["levenberg-marquardt", "gauss-newton", "batched-levenberg-marquardt"]
+)
 def test_seed001_table_noise_free_recovery(solver, getkey):
     p, theta, v, w = _seed001_table()
     # Random start, a few percent (a) to 50 % (table) off: inside the basin of the

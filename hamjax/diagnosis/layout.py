@@ -51,7 +51,8 @@ from .effects import (
 from .effects._base import FLIP_SIGN, output_half_range, scale_span
 from .effects.backlash import stick_slip_step
 from .effects.time_delay import MAX_DELAY
-from .residuals import noise_std_differences
+from .locate import period_of
+from .residuals import feedback_test, noise_std_differences
 
 
 DETERMINISTIC = (
@@ -86,10 +87,13 @@ NOMINAL_UNCERTAINTY = 0.2  # default relative std of the nominal parameters
 # reversal: no second slip), geometric with ratio 2**(1/64): in a closed loop the
 # command crosses f_s by a hair before each slip (the loop reverses it once the
 # valve moves), so a model with f_s 2 % above the truth misses slips and the SSE
-# has a needle of that width in f_s; f_d / f_s geometric with ratio 2**(1/4) in
-# (0.02, 0.9) (f_d = f_s: the plain play, a start of its own).
+# has a needle of that width in f_s; f_d / f_s geometric with ratio 2**(1/3) in
+# (0.02, 0.9) (f_d = f_s: the plain play, a start of its own). Only for a record
+# that looks closed-loop (`residuals.feedback_test` on the nominal residual, at
+# its stated false-alarm rate): in open loop the command does not stop at the
+# slip, the SSE is not a needle in f_s, and the plain starts serve as before.
 STATIC_BAND_GRID = tuple(0.5 * 2.0 ** (-k / 64) for k in range(362))
-KINETIC_RATIOS = tuple(0.9 * 2.0 ** (-k / 4) for k in range(23))
+KINETIC_RATIOS = tuple(0.9 * 2.0 ** (-k / 3) for k in range(17))
 PROFILE_CHUNK = 512  # grid points simulated at once (memory: chunk x length)
 PROFILE_STARTS = 2  # best profile points kept as starts of the backlash rows
 
@@ -159,6 +163,14 @@ def stick_slip_profile(
     sse = np.where(np.isfinite(sse), sse, np.inf)
     best = np.argsort(sse, kind="stable")[:PROFILE_STARTS]
     return tuple((float(fs[i] + fd[i]), float(fs[i] - fd[i])) for i in best)
+
+
+def _looks_closed_loop(r: np.ndarray, v: np.ndarray) -> bool:
+    """`residuals.feedback_test` of the nominal residual `r` against `v` (False
+    where it does not apply: a periodic input, a short record)."""
+    if period_of(v) is not None:
+        return False
+    return bool(feedback_test(r, v).get("closed_loop", False))
 
 
 def _response_many(linear, x: np.ndarray, dt: float) -> np.ndarray:
@@ -379,7 +391,9 @@ def prepare(
         ),
         stick_slip=stick_slip_profile(
             nom, plant.linear, dt, np.asarray(v), np.asarray(est["y"]), L
-        ),
+        )
+        if _looks_closed_loop(np.asarray(est["y"]) - w_est, np.asarray(v))
+        else (),
     )
     b_disc, ct_num, ct_pad, den_slots, den_lead, den_free = _linear_templates(nom, dt)
     names = slot_names(N_MAX)

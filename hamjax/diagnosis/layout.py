@@ -136,7 +136,7 @@ def _valve_positions(
 def stick_slip_profile(
     nom: "Nominal", linear, dt: float, v: np.ndarray, y: np.ndarray, length: int
 ) -> tuple[tuple[float, float], ...]:
-    r"""The `PROFILE_STARTS` best $(S, J)$ of the stick-slip play on the grid
+    r"""The `PROFILE_STARTS` best $(S, J, g)$ of the stick-slip play on the grid
     `STATIC_BAND_GRID` x `KINETIC_RATIOS`, each scored by the estimation SSE of
     $y \approx g\,G x(S, J)$ with the nominal linear block $G$ and the gain $g$
     by least squares (separable: for fixed $(S, J)$ the model is linear in $g$).
@@ -150,7 +150,7 @@ def stick_slip_profile(
     fs = np.repeat(np.asarray(STATIC_BAND_GRID) * vr, len(KINETIC_RATIOS))
     fd = fs * np.tile(np.asarray(KINETIC_RATIOS), len(STATIC_BAND_GRID))
     vp = np.concatenate([v, np.full(length - n, v[-1])])
-    sse = np.empty(fs.shape[0])
+    sse, gain = np.empty(fs.shape[0]), np.empty(fs.shape[0])
     for i in range(0, fs.shape[0], PROFILE_CHUNK):
         c = slice(i, i + PROFILE_CHUNK)
         x = np.asarray(_valve_positions(vp, fs[c] + fd[c], fs[c] - fd[c]))[:, :n]
@@ -160,9 +160,12 @@ def stick_slip_profile(
         ww = np.einsum("gk,gk->g", w, w)
         g = np.where(ww > 0, w @ y / np.where(ww > 0, ww, 1.0), 0.0)
         sse[c] = np.sum((y[None, :] - g[:, None] * w) ** 2, axis=1)
+        gain[c] = g
     sse = np.where(np.isfinite(sse), sse, np.inf)
     best = np.argsort(sse, kind="stable")[:PROFILE_STARTS]
-    return tuple((float(fs[i] + fd[i]), float(fs[i] - fd[i])) for i in best)
+    return tuple(
+        (float(fs[i] + fd[i]), float(fs[i] - fd[i]), float(gain[i])) for i in best
+    )
 
 
 def _looks_closed_loop(r: np.ndarray, v: np.ndarray) -> bool:
@@ -453,9 +456,15 @@ def prepare(
                 if FLIP_SIGN in start
                 else {}
             )
-            start = {n: x for n, x in start.items() if n != FLIP_SIGN}
+            # a start's gain (the stick-slip profile's) only where the gain is
+            # re-fitted (identity maps; elsewhere the map's slopes carry it)
+            start = {
+                n: x
+                for n, x in start.items()
+                if n != FLIP_SIGN and (n != "gain" or "gain" in refit)
+            }
             for tau in taus:
-                free_names = refit + list(start)
+                free_names = refit + [n for n in start if n not in refit]
                 idx = np.full(P, S)
                 idx[: len(free_names)] = [names.index(n) for n in free_names]
                 theta0 = np.zeros(P)

@@ -40,7 +40,7 @@ def test_the_profile_finds_the_static_band_of_a_closed_loop():
         fs = fs_rel * np.ptp(op)
         plant, dt, op, pv = _sticky_loop(i, fs, ratio * fs)
         assert 0.5 * np.ptp(op) > fs  # the valve slips more than once
-        (S, J), _ = stick_slip_profile(
+        (S, J, _), _ = stick_slip_profile(
             describe_nominal(plant), plant.linear, dt, op, pv, bucket(op.shape[0])
         )
         # noise-free with the true process: the best grid point's f_s within two

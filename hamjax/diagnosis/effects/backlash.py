@@ -71,8 +71,10 @@ class BacklashEffect(AbstractEffect):
         # the best points of the profile in (f_s, f_d) (`ctx.stick_slip`): the
         # exact step gives f_s no derivative, and the tangents of S and J are
         # opposite (both reach x only through f_d), so a fit moves f_d at about
-        # the f_s it starts from
+        # the f_s it starts from; the profile's gain starts the re-fit's gain
         plain = [{"backlash": 0.04 * span(ctx)}, {"backlash": 0.2 * span(ctx)}]
         sticky = [{**s, "slip_jump": 0.5 * s["backlash"]} for s in plain]
-        profile = [{"backlash": S, "slip_jump": J} for S, J in ctx.stick_slip]
+        profile = [
+            {"backlash": S, "slip_jump": J, "gain": g} for S, J, g in ctx.stick_slip
+        ]
         return plain + sticky + profile

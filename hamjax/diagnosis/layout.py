@@ -3,8 +3,11 @@ model, and the candidate catalogue into rows (NumPy; runs once per case)."""
 
 from dataclasses import dataclass
 
+import jax
 import numpy as np
 import scipy.linalg
+from jax import lax
+from jaxtyping import Array, Float
 
 from ..models import (
     Backlash,
@@ -46,8 +49,10 @@ from .effects import (
     TimeDelayEffect,
 )
 from .effects._base import FLIP_SIGN, output_half_range, scale_span
+from .effects.backlash import stick_slip_step
 from .effects.time_delay import MAX_DELAY
-from .residuals import noise_std_differences
+from .locate import period_of
+from .residuals import feedback_test, noise_std_differences
 
 
 DETERMINISTIC = (
@@ -75,6 +80,22 @@ RELATIVE_STEP = 0.1
 LR_ALPHA = 1e-3  # level of the nested likelihood-ratio tests (before Bonferroni)
 PRIOR_FLOOR = 1e-6  # the prior's weight without a stated uncertainty (a tie-break)
 NOMINAL_UNCERTAINTY = 0.2  # default relative std of the nominal parameters
+# The profile of the stick-slip play in (f_s, f_d) (`stick_slip_profile`): f_s as
+# fractions of the input's range from 1 % (a valve that moves by less than a
+# hundredth of its command's range is a play the plain starts already cover) to
+# 50 % (beyond half the range the command never leaves the stick band after a
+# reversal: no second slip), geometric with ratio 2**(1/64): in a closed loop the
+# command crosses f_s by a hair before each slip (the loop reverses it once the
+# valve moves), so a model with f_s 2 % above the truth misses slips and the SSE
+# has a needle of that width in f_s; f_d / f_s geometric with ratio 2**(1/3) in
+# (0.02, 0.9) (f_d = f_s: the plain play, a start of its own). Only for a record
+# that looks closed-loop (`residuals.feedback_test` on the nominal residual, at
+# its stated false-alarm rate): in open loop the command does not stop at the
+# slip, the SSE is not a needle in f_s, and the plain starts serve as before.
+STATIC_BAND_GRID = tuple(0.5 * 2.0 ** (-k / 64) for k in range(362))
+KINETIC_RATIOS = tuple(0.9 * 2.0 ** (-k / 3) for k in range(17))
+PROFILE_CHUNK = 512  # grid points simulated at once (memory: chunk x length)
+PROFILE_STARTS = 2  # best profile points kept as starts of the backlash rows
 
 
 def prior_weight(uncertainty: float | None, noise_std: float) -> float:
@@ -97,6 +118,75 @@ def prior_weight(uncertainty: float | None, noise_std: float) -> float:
     if not (np.isfinite(uncertainty) and uncertainty > 0):
         raise ValueError(f"the nominal uncertainty must be > 0, got {uncertainty}")
     return max(PRIOR_FLOOR, (noise_std * RELATIVE_STEP / uncertainty) ** 2)
+
+
+@jax.jit
+def _valve_positions(
+    v: Float[Array, " L"], width: Float[Array, " G"], jump: Float[Array, " G"]
+) -> Float[Array, "G L"]:
+    """The stick-slip play (`stick_slip_step`) of each (S, J) over `v`, from
+    $x_{-1} = v_0$ as in the augmented model."""
+
+    def one(c, j):
+        return lax.scan(lambda x, vk: (stick_slip_step(x, vk, c, j),) * 2, v[0], v)[1]
+
+    return jax.vmap(one)(width, jump)
+
+
+def stick_slip_profile(
+    nom: "Nominal", linear, dt: float, v: np.ndarray, y: np.ndarray, length: int
+) -> tuple[tuple[float, float], ...]:
+    r"""The `PROFILE_STARTS` best $(S, J, g)$ of the stick-slip play on the grid
+    `STATIC_BAND_GRID` x `KINETIC_RATIOS`, each scored by the estimation SSE of
+    $y \approx g\,G x(S, J)$ with the nominal linear block $G$ and the gain $g$
+    by least squares (separable: for fixed $(S, J)$ the model is linear in $g$).
+
+    The exact step's instants of slip move only with $f_s$, where the fit has no
+    derivative; this search places $f_s$ (and $f_d$ near its value) before the
+    Levenberg-Marquardt fit, which then moves $f_d$ and the re-fit. `length`:
+    the padded record length (one compilation per length)."""
+    n = v.shape[0]
+    vr = float(max(np.ptp(v), 1e-12))
+    fs = np.repeat(np.asarray(STATIC_BAND_GRID) * vr, len(KINETIC_RATIOS))
+    fd = fs * np.tile(np.asarray(KINETIC_RATIOS), len(STATIC_BAND_GRID))
+    vp = np.concatenate([v, np.full(length - n, v[-1])])
+    sse, gain = np.empty(fs.shape[0]), np.empty(fs.shape[0])
+    for i in range(0, fs.shape[0], PROFILE_CHUNK):
+        c = slice(i, i + PROFILE_CHUNK)
+        x = np.asarray(_valve_positions(vp, fs[c] + fd[c], fs[c] - fd[c]))[:, :n]
+        if nom.nl_kind != NL_IDENTITY:
+            x = np.stack([_static_numpy(nom, xi) for xi in x])
+        w = _response_many(linear, x, dt)
+        ww = np.einsum("gk,gk->g", w, w)
+        g = np.where(ww > 0, w @ y / np.where(ww > 0, ww, 1.0), 0.0)
+        sse[c] = np.sum((y[None, :] - g[:, None] * w) ** 2, axis=1)
+        gain[c] = g
+    sse = np.where(np.isfinite(sse), sse, np.inf)
+    best = np.argsort(sse, kind="stable")[:PROFILE_STARTS]
+    return tuple(
+        (float(fs[i] + fd[i]), float(fs[i] - fd[i]), float(gain[i])) for i in best
+    )
+
+
+def _looks_closed_loop(r: np.ndarray, v: np.ndarray) -> bool:
+    """`residuals.feedback_test` of the nominal residual `r` against `v` (False
+    where it does not apply: a periodic input, a short record)."""
+    if period_of(v) is not None:
+        return False
+    return bool(feedback_test(r, v).get("closed_loop", False))
+
+
+def _response_many(linear, x: np.ndarray, dt: float) -> np.ndarray:
+    """`_response_numpy` of each row of `x` (one `lfilter` call)."""
+    from scipy import signal
+
+    if isinstance(linear, ContinuousTransferFunction):
+        A, B, C, D = _zoh_numpy(np.asarray(linear.num), np.asarray(linear.den), dt)
+        b, a = signal.ss2tf(A, B, C, D)
+        b, a = np.asarray(b[0], float), np.asarray(a, float)
+    else:
+        b, a = np.asarray(linear.b, float), np.asarray(linear.a, float)
+    return signal.lfilter(b, a, x, axis=1)
 
 
 def bucket(n: int) -> int:
@@ -302,6 +392,11 @@ def prepare(
         dw_half=float(
             max(abs(np.quantile(dw, 0.98)), abs(np.quantile(dw, 0.02)), 1e-12)
         ),
+        stick_slip=stick_slip_profile(
+            nom, plant.linear, dt, np.asarray(v), np.asarray(est["y"]), L
+        )
+        if _looks_closed_loop(np.asarray(est["y"]) - w_est, np.asarray(v))
+        else (),
     )
     b_disc, ct_num, ct_pad, den_slots, den_lead, den_free = _linear_templates(nom, dt)
     names = slot_names(N_MAX)
@@ -361,9 +456,15 @@ def prepare(
                 if FLIP_SIGN in start
                 else {}
             )
-            start = {n: x for n, x in start.items() if n != FLIP_SIGN}
+            # a start's gain (the stick-slip profile's) only where the gain is
+            # re-fitted (identity maps; elsewhere the map's slopes carry it)
+            start = {
+                n: x
+                for n, x in start.items()
+                if n != FLIP_SIGN and (n != "gain" or "gain" in refit)
+            }
             for tau in taus:
-                free_names = refit + list(start)
+                free_names = refit + [n for n in start if n not in refit]
                 idx = np.full(P, S)
                 idx[: len(free_names)] = [names.index(n) for n in free_names]
                 theta0 = np.zeros(P)

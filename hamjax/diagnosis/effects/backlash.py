@@ -67,8 +67,14 @@ class BacklashEffect(AbstractEffect):
         return {"backlash": unit, "slip_jump": unit}
 
     def starts(self, ctx: StartContext) -> list[dict[str, float]]:
-        # the plain play at two widths, and each with a slip jump of half of it
-        # (J = S/2: stick band and dead band alike, the middle of 0 <= J <= S)
+        # the plain play at two widths, each with a slip jump of half of it, and
+        # the best points of the profile in (f_s, f_d) (`ctx.stick_slip`): the
+        # exact step gives f_s no derivative, and the tangents of S and J are
+        # opposite (both reach x only through f_d), so a fit moves f_d at about
+        # the f_s it starts from; the profile's gain starts the re-fit's gain
         plain = [{"backlash": 0.04 * span(ctx)}, {"backlash": 0.2 * span(ctx)}]
         sticky = [{**s, "slip_jump": 0.5 * s["backlash"]} for s in plain]
-        return plain + sticky
+        profile = [
+            {"backlash": S, "slip_jump": J, "gain": g} for S, J, g in ctx.stick_slip
+        ]
+        return plain + sticky + profile

@@ -693,16 +693,19 @@ def score(
 
 def stiction_score(truth: dict, named: dict) -> dict:
     """The stiction question on a control-loop benchmark (truth `backlash` = a sticky
-    valve): recall (stiction loops named `backlash`), false-alarm rate (loops
-    without stiction named one of STICTION_LIKE) and balanced accuracy
-    (recall + 1 - false alarm) / 2, over the cases with a result."""
-    hit, n_st, alarm, n_free = 0, 0, 0, 0
+    valve), with one answer on both sides: "the valve sticks" is a name in
+    STICTION_LIKE. Recall (stiction loops so named), false-alarm rate (loops without
+    stiction so named), balanced accuracy (recall + 1 - false alarm) / 2, over the
+    cases with a result; `recall_backlash` also counts the stiction loops named the
+    contract's class `backlash` itself (the stricter reading)."""
+    hit, exact, n_st, alarm, n_free = 0, 0, 0, 0, 0
     for name, tr in truth["cases"].items():
         if name not in named:
             continue
         if tr["effect"] == "backlash":
             n_st += 1
-            hit += named[name] == "backlash"
+            hit += named[name] in STICTION_LIKE
+            exact += named[name] == "backlash"
         else:
             n_free += 1
             alarm += named[name] in STICTION_LIKE
@@ -712,6 +715,7 @@ def stiction_score(truth: dict, named: dict) -> dict:
         "n_stiction": n_st,
         "n_without": n_free,
         "recall": recall,
+        "recall_backlash": exact / n_st if n_st else float("nan"),
         "false_alarm": false_alarm,
         "balanced_accuracy": (recall + 1 - false_alarm) / 2,
     }
@@ -746,7 +750,8 @@ def format_score(s: dict) -> str:
     if s.get("stiction"):
         st = s["stiction"]
         lines.append(
-            f"stiction: recall {st['recall']:.3f} (of {st['n_stiction']})  false alarm "
+            f"stiction: recall {st['recall']:.3f} (of {st['n_stiction']}; named "
+            f"backlash itself {st['recall_backlash']:.3f})  false alarm "
             f"{st['false_alarm']:.3f} (of {st['n_without']}; named one of "
             f"{', '.join(STICTION_LIKE)})  balanced accuracy "
             f"{st['balanced_accuracy']:.3f}"

@@ -257,16 +257,21 @@ def test_stiction_scores():
     names = {f"c{i}": p for i, p in enumerate(named)}
     s = score(truth, names)
     st = s["stiction"]
-    # recall: 2 of 4 stiction loops named backlash (dead_zone does not count);
-    # false alarm: friction and preload on 2 of the 4 loops without stiction
-    assert st["recall"] == 0.5 and st["false_alarm"] == 0.5
-    assert st["balanced_accuracy"] == 0.5
+    # recall: 3 of 4 stiction loops named stiction-like (backlash twice, dead_zone),
+    # 2 of 4 named backlash itself; false alarm: friction and preload on 2 of the 4
+    # loops without stiction
+    assert st["recall"] == 0.75 and st["false_alarm"] == 0.5
+    assert st["recall_backlash"] == 0.5
+    assert st["balanced_accuracy"] == 0.625
     assert {"friction", "preload", "dead_zone", "backlash"} == set(STICTION_LIKE)
-    assert "stiction: recall 0.500" in format_score(s)
-    names["c1"], names["c5"] = "backlash", "unexplained"
+    assert "stiction: recall 0.750 (of 4; named backlash itself 0.500)" in (
+        format_score(s)
+    )
+    names["c2"], names["c5"] = "friction", "unexplained"
     st = score(truth, names)["stiction"]
-    assert (st["recall"], st["false_alarm"]) == (0.75, 0.25)
-    assert st["balanced_accuracy"] == 0.75
+    assert (st["recall"], st["false_alarm"]) == (1.0, 0.25)
+    assert st["recall_backlash"] == 0.5
+    assert st["balanced_accuracy"] == 0.875
     truth["family"] = "B"
     assert score(truth, names)["stiction"] is None
 

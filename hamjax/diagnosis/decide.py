@@ -96,6 +96,7 @@ from .augmented import NL_PIECEWISE
 from .fit import nominal_mask
 from .layout import Prepared, best_row_per_class, finite_sse, validation_sse
 from .noise_fit import NOISE_MODELS, NOISE_PARAMETERS, noise_family_numpy
+from .residuals import batch_means_se
 
 
 ALPHA = 0.05  # family-wise false-alarm rate on `none` (module docstring)
@@ -111,11 +112,9 @@ NOISE_CLASS = {
 
 def batch_means_z(d: np.ndarray, n_blocks: int = N_BLOCKS) -> float:
     """$\\bar d / \\mathrm{se}$, se of the mean by batch means over `n_blocks`."""
-    n = d.shape[0] // n_blocks * n_blocks
-    if n < n_blocks or not np.all(np.isfinite(d)):
+    if d.shape[0] < n_blocks or not np.all(np.isfinite(d)):
         return -math.inf
-    means = d[:n].reshape(n_blocks, -1).mean(axis=1)
-    se = float(np.std(means, ddof=1)) / math.sqrt(n_blocks)
+    se = float(batch_means_se(d, n_blocks))
     mean = float(np.mean(d))
     if se == 0:
         return 0.0 if mean == 0 else math.copysign(math.inf, mean)

@@ -44,6 +44,15 @@ def noise_std_differences(r: np.ndarray) -> float:
     return float(np.median(np.abs(d)) / (0.6744897501960817 * math.sqrt(6.0)))
 
 
+def batch_means_se(x: np.ndarray, n_blocks: int) -> float:
+    """Standard error of the mean of `x` by batch means: the sample std of the means
+    of `n_blocks` contiguous blocks (the first `n_blocks * (len // n_blocks)`
+    samples) over $\\sqrt{B}$; needs `len(x) >= n_blocks`."""
+    n = x.shape[0] // n_blocks * n_blocks
+    means = x[:n].reshape(n_blocks, -1).mean(axis=1)
+    return np.std(means, ddof=1) / math.sqrt(n_blocks)
+
+
 def improvement_z(
     r_before: np.ndarray, r_after: np.ndarray, n_blocks: int = 20
 ) -> float:
@@ -60,11 +69,9 @@ def improvement_z(
     r_a = np.asarray(r_after, float)
     d = r_b**2 - r_a**2
     s = 2 * r_a * (r_b - r_a)
-    n = d.shape[0] // n_blocks * n_blocks
-    if n < n_blocks:
+    if d.shape[0] < n_blocks:
         return 0.0
-    means = s[:n].reshape(n_blocks, -1).mean(axis=1)
-    se = np.std(means, ddof=1) / math.sqrt(n_blocks)
+    se = batch_means_se(s, n_blocks)
     if not np.isfinite(se) or not np.isfinite(np.mean(d)):
         return -np.inf
     if se == 0:

@@ -8,7 +8,9 @@ from scipy.signal import lfilter
 import hamjax as hj
 from hamjax.diagnosis.layout import (
     KINETIC_RATIOS,
+    PROFILE_STARTS,
     STATIC_BAND_GRID,
+    VARIANTS,
     bucket,
     describe_nominal,
     prepare,
@@ -17,9 +19,10 @@ from hamjax.diagnosis.layout import (
 from hamjax.papers.gap import control_loops as cl
 
 
-def _sticky_loop(i: int, fs: float, fd: float, n: int = 2000):
+def _sticky_loop(i: int, fs: float, fd: float, n: int = 2000, valve=None):
     """An FOPDT process under SIMC PI control, setpoint steps every 250 samples,
-    noise-free; the valve by He et al.'s model. Returns the plant, op, pv."""
+    noise-free; the valve by He et al.'s model (or `valve`). Returns the plant,
+    op, pv."""
     rng = np.random.default_rng([19, i])
     dt, p, delay = 2.0, {"K": 1.5, "tau": 60.0}, 1
     b, a = cl.discrete_process(*cl.process_tf("fopdt", p), dt, delay)
@@ -28,7 +31,7 @@ def _sticky_loop(i: int, fs: float, fd: float, n: int = 2000):
     sp[:50] = 0.0  # from rest, as the valve model starts
     zero = np.zeros(n)
     loop = cl.simulate_loop(
-        b, a, pi, dt, sp, zero, zero, valve=cl.HeStiction(fs, fd, x0=0.0)
+        b, a, pi, dt, sp, zero, zero, valve=valve or cl.HeStiction(fs, fd, x0=0.0)
     )
     plant = hj.Hammerstein(hj.Identity(), hj.DiscreteTransferFunction(b, a, dt))
     return plant, dt, loop["op"], loop["pv"]
@@ -40,9 +43,10 @@ def test_the_profile_finds_the_static_band_of_a_closed_loop():
         fs = fs_rel * np.ptp(op)
         plant, dt, op, pv = _sticky_loop(i, fs, ratio * fs)
         assert 0.5 * np.ptp(op) > fs  # the valve slips more than once
-        (S, J, _), _ = stick_slip_profile(
+        profile = stick_slip_profile(
             describe_nominal(plant), plant.linear, dt, op, pv, bucket(op.shape[0])
         )
+        S, J = next((S, J) for S, J, _, slot in profile if slot == "slip_jump")
         # noise-free with the true process: the best grid point's f_s within two
         # grid steps (ratio 2**(1/64)) of the truth, f_d within one step of its
         # ratio grid (2**(1/3)): the grid holds nothing closer, and a wrong slip
@@ -72,5 +76,29 @@ def test_an_open_loop_record_gets_no_profile():
     plant_c, dt_c, op, pv = _sticky_loop(0, 1.0, 0.3)
     noise = 0.01 * np.random.default_rng([19, 98]).standard_normal(pv.shape[0])
     rec = {"t": dt_c * np.arange(op.shape[0]), "v": op, "y": pv + noise}
-    # the same kind of record from a PI loop: the profile's starts are there
-    assert len(prepare(plant_c, dt_c, rec, rec).ctx.stick_slip) == 2
+    # the same kind of record from a PI loop: the profile's starts are there, of
+    # both variants
+    found = prepare(plant_c, dt_c, rec, rec).ctx.stick_slip
+    assert sorted(slot for *_, slot in found) == sorted(VARIANTS * PROFILE_STARTS)
+
+
+def test_a_choudhury_valve_recovered_noise_free_from_the_profile_start():
+    # Choudhury et al.'s valve (it slides while the command keeps its direction),
+    # noise-free, the true process as the nominal: the profile's best slide start
+    # fitted to convergence gives the sliding offset (S - J)/2 (a value, to the
+    # fit's convergence) and the record exactly; S and J only set the instants of
+    # sticking and slipping, which noise-free data pin to an interval, so the
+    # output, not S and J, is what must be exact.
+    from hamjax.diagnosis.fit import fit_row
+
+    plant, dt, op, pv = _sticky_loop(2, 1.0, 1.0)  # a first run for the range
+    S, J = 0.2 * np.ptp(op), 0.12 * np.ptp(op)
+    valve = cl.ChoudhuryStiction(S, J, x0=0.0)
+    plant, dt, op, pv = _sticky_loop(2, 0.0, 0.0, valve=valve)
+    rec = {"t": dt * np.arange(op.shape[0]), "v": op, "y": pv}
+    prep = prepare(plant, dt, rec, rec)
+    slides = [r for n, r in prep.rows if n == "backlash" and r.free[-5 - 4 + 4]]
+    assert prep.ctx.stick_slip, "the loop looks closed"
+    best = next(k for k, (*_, slot) in enumerate(prep.ctx.stick_slip))
+    assert prep.ctx.stick_slip[best][3] == "slide_jump", prep.ctx.stick_slip
+    del slides

@@ -6,8 +6,11 @@ import numpy as np
 from scipy.signal import lfilter
 
 import hamjax as hj
+from hamjax.diagnosis.augmented import slot_index
+from hamjax.diagnosis.fit import fit_row
 from hamjax.diagnosis.layout import (
     KINETIC_RATIOS,
+    N_MAX,
     PROFILE_STARTS,
     STATIC_BAND_GRID,
     VARIANTS,
@@ -84,21 +87,39 @@ def test_an_open_loop_record_gets_no_profile():
 
 def test_a_choudhury_valve_recovered_noise_free_from_the_profile_start():
     # Choudhury et al.'s valve (it slides while the command keeps its direction),
-    # noise-free, the true process as the nominal: the profile's best slide start
-    # fitted to convergence gives the sliding offset (S - J)/2 (a value, to the
-    # fit's convergence) and the record exactly; S and J only set the instants of
-    # sticking and slipping, which noise-free data pin to an interval, so the
-    # output, not S and J, is what must be exact.
-    from hamjax.diagnosis.fit import fit_row
+    # noise-free, the true process as the nominal. The profile ranks a slide point
+    # first; its S lies within two grid steps of the truth (as He's f_s above).
+    # From that start the fit moves the sliding offset f_d = (S - J)/2 (the only
+    # direction with a derivative) to within one grid step (2**(1/64), 1.1 %) of
+    # the truth -- the instants of slipping stay at the grid point's, which is
+    # what is left -- and explains all but 1 % of the nominal's residual energy.
+    for i, s_rel, j_rel in [(0, 0.2, 0.12), (1, 0.1, 0.05), (2, 0.15, 0.12)]:
+        plant, dt, op, pv = _sticky_loop(i, 1.0, 1.0)  # a first run for the range
+        S, J = s_rel * np.ptp(op), j_rel * np.ptp(op)
+        valve = cl.ChoudhuryStiction(S, J, x0=0.0)
+        plant, dt, op, pv = _sticky_loop(i, 0.0, 0.0, valve=valve)
+        rec = {"t": dt * np.arange(op.shape[0]), "v": op, "y": pv}
+        prep = prepare(plant, dt, rec, rec)
+        S0, J0, _, slot = prep.ctx.stick_slip[0]
+        assert slot == "slide_jump", prep.ctx.stick_slip
+        step_s = STATIC_BAND_GRID[0] / STATIC_BAND_GRID[1]
+        assert abs(np.log(S0 / S)) <= 2.0 * np.log(step_s), (S0, S)
+        slide, width = slot_index("slide_jump", N_MAX), slot_index("backlash", N_MAX)
+        row = next(  # the row of the profile's best point (its start)
+            r
+            for n, r in prep.rows
+            if n == "backlash"
+            and r.free[slide]
+            and np.isclose(_start(r, prep, width), S0)
+        )
+        fit = fit_row(row, prep.arrays, 100)
+        Sf, Jf = float(fit.params[width]), float(fit.params[slide])
+        assert abs(np.log(((Sf - Jf) / 2) / ((S - J) / 2))) <= np.log(step_s)
+        gap = np.sum((pv - prep.w_est) ** 2)
+        assert float(fit.sse_est) < 0.01 * gap, (float(fit.sse_est), gap)
 
-    plant, dt, op, pv = _sticky_loop(2, 1.0, 1.0)  # a first run for the range
-    S, J = 0.2 * np.ptp(op), 0.12 * np.ptp(op)
-    valve = cl.ChoudhuryStiction(S, J, x0=0.0)
-    plant, dt, op, pv = _sticky_loop(2, 0.0, 0.0, valve=valve)
-    rec = {"t": dt * np.arange(op.shape[0]), "v": op, "y": pv}
-    prep = prepare(plant, dt, rec, rec)
-    slides = [r for n, r in prep.rows if n == "backlash" and r.free[-5 - 4 + 4]]
-    assert prep.ctx.stick_slip, "the loop looks closed"
-    best = next(k for k, (*_, slot) in enumerate(prep.ctx.stick_slip))
-    assert prep.ctx.stick_slip[best][3] == "slide_jump", prep.ctx.stick_slip
-    del slides
+
+def _start(row, prep, slot):
+    """The physical starting value of `slot` in `row`."""
+    j = list(np.asarray(row.idx)).index(slot)
+    return prep.arrays.anchor[slot] + prep.arrays.scale[slot] * float(row.theta0[j])

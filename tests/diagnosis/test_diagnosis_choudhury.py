@@ -7,6 +7,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from helpers import assert_normal_equations_match_differences
 
 from hamjax.diagnosis.augmented import (
     full_parameters,
@@ -17,7 +18,6 @@ from hamjax.diagnosis.augmented import (
 )
 from hamjax.diagnosis.effects.backlash import slide_init, slide_step, stick_slip_step
 from hamjax.diagnosis.effects.rate_limit import rate_limit_step
-from hamjax.diagnosis.fit import normal_equations
 from hamjax.diagnosis.layout import N_MAX, prepare
 from hamjax.models import DiscreteTransferFunction, Hammerstein, Identity
 from hamjax.papers.gap import control_loops as cl
@@ -154,23 +154,4 @@ def test_slide_normal_equations_match_finite_differences():
         valve(xk)
         slips += was and not valve.stuck
     assert slips > 3
-
-    def residual(t):
-        y = simulate_row(t, row, case.v_est, case)
-        return np.asarray((y - case.y_est) * case.m_est / case.y_scale)
-
-    r0 = residual(theta)
-    Jfd = np.stack(
-        [
-            (residual(theta + h * e) - residual(theta - h * e)) / (2 * h)
-            for e in np.eye(theta.shape[0])
-        ],
-        axis=1,
-    )
-    sse, H, g = normal_equations(theta, row, case)
-    np.testing.assert_allclose(sse, r0 @ r0, rtol=1e-12)
-    np.testing.assert_allclose(H, Jfd.T @ Jfd, rtol=1e-6, atol=1e-8 * np.abs(H).max())
-    np.testing.assert_allclose(g, Jfd.T @ r0, rtol=1e-6, atol=1e-8 * np.abs(g).max())
-    # the slide jump acts: its column is not zero
-    j = list(np.asarray(row.idx)).index(slide)
-    assert np.abs(Jfd[:, j]).max() > 1e-3
+    assert_normal_equations_match_differences(theta, row, case, slide, h=h)

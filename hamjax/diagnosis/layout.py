@@ -154,8 +154,8 @@ def _valve_positions(
 def stick_slip_profile(
     nom: "Nominal", linear, dt: float, v: np.ndarray, y: np.ndarray, length: int
 ) -> tuple[tuple[float, float, float, str], ...]:
-    r"""The `PROFILE_STARTS` best $(S, J, g, \text{slot})$ of each stick-slip
-    variant (`VARIANTS`: the jump's slot) on the grid `STATIC_BAND_GRID` x
+    r"""The `PROFILE_STARTS` best $(S, J, g, \text{slot})$ over both stick-slip
+    variants (`VARIANTS`: the jump's slot) on the grid `STATIC_BAND_GRID` x
     `KINETIC_RATIOS` ($S = f_s + f_d$, $J = f_s - f_d$ for both: the same
     reversal band $S$ and sliding offset $f_d = (S - J)/2$), best first, each
     scored by the estimation SSE of $y \approx g\,G x(S, J)$ with the nominal
@@ -191,7 +191,8 @@ def stick_slip_profile(
         best = np.argsort(sse, kind="stable")[:PROFILE_STARTS]
         found += [(sse[i], fs[i] + fd[i], fs[i] - fd[i], gain[i], slot) for i in best]
     found.sort(key=lambda f: f[0])  # stable: the He variant first on ties
-    return tuple((float(S), float(J), float(g), slot) for _, S, J, g, slot in found)
+    kept = found[:PROFILE_STARTS]  # as many starts as one variant had
+    return tuple((float(S), float(J), float(g), slot) for _, S, J, g, slot in kept)
 
 
 def _looks_closed_loop(r: np.ndarray, v: np.ndarray) -> bool:

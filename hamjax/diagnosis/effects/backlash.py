@@ -89,17 +89,17 @@ def slide_step(
     only (tangents $\\mp d/2$), the instants of sticking and slipping not at all.
     """
     x_ss, direction, stuck = state
-    sliding = stuck < 0.5
-    goes_on = sliding & (jnp.sign(x - x_prev) == direction) & (x != x_prev)
-    y = jnp.where(goes_on, x - direction * (width - jump) / 2, y_prev)
-    x_ss = jnp.where(sliding & ~goes_on, x_prev, x_ss)
+    # sliding, the direction is +-1, so a still input (sign 0) does not go on;
+    # the bands are >= 0, so a slip has x != x_ss: few operations (this runs in
+    # every memory row's scan, tangents and all)
+    goes_on = (stuck < 0.5) & (jnp.sign(x - x_prev) == direction)
+    x_ss = jnp.where((stuck < 0.5) & ~goes_on, x_prev, x_ss)
     d = jnp.sign(x - x_ss)
-    band = jnp.where(d == direction, jump, width)
-    slips = ~goes_on & (d != 0) & (jnp.abs(x - x_ss) > band)
-    y = jnp.where(slips, x - d * (width - jump) / 2, y)
+    slips = ~goes_on & (jnp.abs(x - x_ss) > jnp.where(d == direction, jump, width))
     direction = jnp.where(slips, d, direction)
-    stuck = jnp.where(goes_on | slips, jnp.zeros_like(stuck), jnp.ones_like(stuck))
-    return y, (x_ss, direction, stuck)
+    moves = goes_on | slips
+    y = jnp.where(moves, x - direction * (width - jump) / 2, y_prev)
+    return y, (x_ss, direction, (~moves).astype(stuck.dtype))
 
 
 class BacklashEffect(AbstractEffect):

@@ -137,3 +137,30 @@ def backlash_periods(backlash, levels, periods=3) -> np.ndarray:
     v = np.concatenate([levels[-1:], levels[:1], *[cyc] * periods])
     u = np.asarray(hj.apply_nonlinearity(backlash, jnp.asarray(v)))
     return u[2:].reshape(periods, -1)
+
+
+def assert_normal_equations_match_differences(theta, row, case, slot, *, h=1e-6):
+    """`fit.normal_equations` of `row` at `theta` against central differences of
+    the simulated residual (step `h`; rounding ~ eps/h ~ 1e-10 relative, so 1e-6
+    is ample where the model is smooth), and slot `slot`'s column not zero."""
+    from hamjax.diagnosis.augmented import simulate_row
+    from hamjax.diagnosis.fit import normal_equations
+
+    def residual(t):
+        y = simulate_row(t, row, case.v_est, case)
+        return np.asarray((y - case.y_est) * case.m_est / case.y_scale)
+
+    r0 = residual(theta)
+    J = np.stack(
+        [
+            (residual(theta + h * e) - residual(theta - h * e)) / (2 * h)
+            for e in np.eye(theta.shape[0])
+        ],
+        axis=1,
+    )
+    sse, H, g = normal_equations(theta, row, case)
+    np.testing.assert_allclose(sse, r0 @ r0, rtol=1e-12)
+    np.testing.assert_allclose(H, J.T @ J, rtol=1e-6, atol=1e-8 * np.abs(H).max())
+    np.testing.assert_allclose(g, J.T @ r0, rtol=1e-6, atol=1e-8 * np.abs(g).max())
+    j = list(np.asarray(row.idx)).index(slot)
+    assert np.abs(J[:, j]).max() > 1e-3

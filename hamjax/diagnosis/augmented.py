@@ -41,7 +41,7 @@ from jaxtyping import Array, Bool, Float, Int
 from ..models.nonlinearities.backlash import Backlash, BacklashState
 from ..models.nonlinearities.piecewise_linear import piecewise_linear_map
 from .effects._base import UNIT_MAX, StartContext, unit_raw
-from .effects.backlash import BacklashEffect, stick_slip_step
+from .effects.backlash import BacklashEffect, slide_init, slide_step, stick_slip_step
 from .effects.dead_zone import DeadZoneEffect, dead_zone
 from .effects.extra_pole import ExtraPoleEffect
 from .effects.feedback_nonlinearity import (
@@ -401,21 +401,24 @@ def memory_scan(
     case: CaseArrays,
     table: bool | Bool[Array, ""] = True,
 ) -> tuple[tuple, Float[Array, " B"]]:
-    """Rate limit, play operator with slip jump (`stick_slip_step`), then a
-    backlash nominal, at parameters `p` (`memory_arguments`), from `state =
-    (rate-limited, play output, nominal backlash state)`: `(state_end, x)` (one
-    scan; chains over blocks like `filter_scan`). `table=False` skips the nominal
-    backlash (exact unless the case has one)."""
-    max_step, width, jump, nominal = memory_arguments(p, case)
+    """Rate limit, play operator with slip jump (`stick_slip_step`) or slide jump
+    (`slide_step`), then a backlash nominal, at parameters `p`
+    (`memory_arguments`), from `state` (`memory_init`: rate-limited input, play
+    output, the slide's state, nominal backlash state): `(state_end, x)` (one
+    scan; chains over blocks like `filter_scan`). A zero slide jump leaves the
+    play's arithmetic as it is. `table=False` skips the nominal backlash (exact
+    unless the case has one)."""
+    max_step, width, jump, slide, nominal = memory_arguments(p, case)
 
     def step(carry, vk, with_nominal):
-        xr, xb, bl = carry
-        xr = rate_limit_step(xr, vk, max_step)
-        xb = stick_slip_step(xb, xr, width, jump)
+        x_prev, xb, ss, bl = carry
+        xr = rate_limit_step(x_prev, vk, max_step)
+        xs, ss = slide_step(xb, ss, x_prev, xr, width, slide)
+        xb = jnp.where(slide > 0, xs, stick_slip_step(xb, xr, width, jump))
         if not with_nominal:
-            return (xr, xb, bl), xb
+            return (xr, xb, ss, bl), xb
         bl, x = nominal.step(bl, xb)
-        return (xr, xb, bl), x
+        return (xr, xb, ss, bl), x
 
     def run(with_nominal):
         return lambda v, state: lax.scan(
@@ -425,16 +428,22 @@ def memory_scan(
     return switch(table, run(True), run(False), v, state)
 
 
+def memory_init(v0: Float[Array, ""], p: Float[Array, " S"], case: CaseArrays):
+    """The state of `memory_scan` at rest at its first input $v_0$: the rate
+    limit and the play at $v_0$ (centred in the play), the slide stuck there
+    (`slide_init`), the nominal backlash centred in its play."""
+    return (v0, v0, slide_init(v0), memory_arguments(p, case)[-1].init(v0))
+
+
 def input_memory(
     v: Float[Array, " L"],
     p: Float[Array, " S"],
     case: CaseArrays,
     table: bool | Bool[Array, ""] = True,
 ) -> Float[Array, " L"]:
-    """Rate limit, play (with slip jump) and a backlash nominal, all started at
-    $v_0$."""
-    state = (v[0], v[0], memory_arguments(p, case)[-1].init(v[0]))
-    return memory_scan(v, state, p, case, table)[1]
+    """Rate limit, play (with slip or slide jump) and a backlash nominal, all
+    started at $v_0$."""
+    return memory_scan(v, memory_init(v[0], p, case), p, case, table)[1]
 
 
 def named(p: Float[Array, " S"], case: CaseArrays) -> Callable[[str], Array]:
@@ -454,8 +463,8 @@ def filter_coefficients(p: Float[Array, " S"], case: CaseArrays) -> tuple[Array,
 
 
 def memory_arguments(p: Float[Array, " S"], case: CaseArrays) -> tuple:
-    """`(max_step, width, jump, nominal)` of the input-memory scan (rate limit per
-    sample, play with its slip jump, the nominal backlash)."""
+    """`(max_step, width, jump, slide, nominal)` of the input-memory scan (rate
+    limit per sample, play with its slip or slide jump, the nominal backlash)."""
     at = named(p, case)
     nominal = NominalBacklash(
         at("in_scale"),
@@ -465,7 +474,8 @@ def memory_arguments(p: Float[Array, " S"], case: CaseArrays) -> tuple:
         case.tab_d,
         case.nl_kind == NL_BACKLASH,
     )
-    return at("rate") * case.dt, at("backlash"), at("slip_jump"), nominal
+    jumps = at("backlash"), at("slip_jump"), at("slide_jump")
+    return at("rate") * case.dt, *jumps, nominal
 
 
 def static_part(

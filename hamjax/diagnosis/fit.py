@@ -34,7 +34,7 @@ from .augmented import (
     filter_coefficients,
     full_parameters,
     linear_part,
-    memory_arguments,
+    memory_init,
     memory_scan,
     output_part,
     simulate_with_filter,
@@ -77,16 +77,15 @@ def nominal_mask(row: Row, case: CaseArrays) -> Bool[Array, " P"]:
 
 def _block_model(p, b, a, state, vb, case, memory, table, feedback):
     """One block of the estimation record through the augmented model, from the
-    scans' `state = (rate-limited input, play output, nominal backlash state,
-    filter state)` (`augmented.memory_scan`; `augmented.linear_part`: the
-    feedback loop or the plain filter)."""
-    xr, xb, bl, z = state
+    scans' `state = (memory-scan state, filter state)` (`augmented.memory_scan`
+    and `augmented.memory_init`; `augmented.linear_part`: the feedback loop or
+    the plain filter)."""
+    mem, z = state
     skip = lambda v, s, *_: (s, v)  # noqa: E731
-    args = (vb, (xr, xb, bl), p, case, table)
-    (xr, xb, bl), x = switch(memory, memory_scan, skip, *args)
+    mem, x = switch(memory, memory_scan, skip, vb, mem, p, case, table)
     u = static_part(x, p, case, table)
     z, w = linear_part(b, a, u, z, p, case, feedback)
-    return (xr, xb, bl, z), output_part(w, p, case)
+    return (mem, z), output_part(w, p, case)
 
 
 def _coefficients(theta, row, case):
@@ -134,14 +133,13 @@ def _normal_equations(theta, row, case, flags):
         lambda t: jax.jvp(lambda th: _coefficients(th, row, case), (theta,), (t,)),
         out_axes=(None, 0),
     )(basis)
-    # the nominal backlash starts centred in its play at vd[0] (its in_scale's
-    # tangents with it); the other scans from vd[0] and rest
-    init = lambda p: memory_arguments(p, case)[-1].init(vd[0])  # noqa: E731
-    bl0, dbl0 = jax.vmap(lambda t: jax.jvp(init, (p,), (t,)), out_axes=(None, 0))(dp)
+    # the memory scan's state at rest at vd[0] (`memory_init`; the nominal
+    # backlash's in_scale tangents with it), the filter at rest
+    init = lambda p: memory_init(vd[0], p, case)  # noqa: E731
+    mem0, dmem0 = jax.vmap(lambda t: jax.jvp(init, (p,), (t,)), out_axes=(None, 0))(dp)
     filt0 = jnp.zeros(a.shape[0] - 1, theta.dtype)
-    state0 = (vd[0], vd[0], bl0, filt0)
-    zeros = lambda x: jnp.zeros((P, *x.shape), x.dtype)  # noqa: E731
-    dstate0 = (zeros(vd[0]), zeros(vd[0]), dbl0, zeros(filt0))
+    state0 = (mem0, filt0)
+    dstate0 = (dmem0, jnp.zeros((P, *filt0.shape), filt0.dtype))
 
     def body(carry):
         k, state, dstate, sse, H, g = carry

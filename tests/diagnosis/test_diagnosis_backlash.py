@@ -11,6 +11,7 @@ import jax.random as jr
 import numpy as np
 import pytest
 import scipy.signal as sg
+from helpers import assert_normal_equations_match_differences
 
 import hamjax as hj
 from hamjax.cli.main import main
@@ -18,12 +19,11 @@ from hamjax.diagnosis.augmented import (
     full_parameters,
     named,
     simulate_augmented,
-    simulate_row,
     slot_index,
 )
 from hamjax.diagnosis.diagnose import diagnose_many
 from hamjax.diagnosis.effects.backlash import play_step, stick_slip_step
-from hamjax.diagnosis.fit import fit_row, normal_equations
+from hamjax.diagnosis.fit import fit_row
 from hamjax.diagnosis.layout import N_MAX, prepare
 from hamjax.io import load_model, write_csv, write_json
 
@@ -168,11 +168,6 @@ def test_stick_slip_normal_equations_match_finite_differences():
     jump_slot = slot_index("slip_jump", N_MAX)
     row = next(r for n, r in prep.rows if n == "backlash" and r.free[jump_slot])
     theta = row.theta0 + 0.1
-
-    def residual(t):
-        y = simulate_row(t, row, case.v_est, case)
-        return np.asarray((y - case.y_est) * case.m_est / case.y_scale)
-
     p = full_parameters(theta, row, case)
     width, jump = (float(named(p, case)(k)) for k in ("backlash", "slip_jump"))
     h = 1e-6
@@ -185,21 +180,7 @@ def test_stick_slip_normal_equations_match_finite_differences():
         slips += over > 0
         x = float(stick_slip_step(x, vk, width, jump))
     assert slips > 3
-    r0 = residual(theta)
-    J = np.stack(
-        [
-            (residual(theta + h * e) - residual(theta - h * e)) / (2 * h)
-            for e in np.eye(theta.shape[0])
-        ],
-        axis=1,
-    )
-    sse, H, g = normal_equations(theta, row, case)
-    np.testing.assert_allclose(sse, r0 @ r0, rtol=1e-12)
-    np.testing.assert_allclose(H, J.T @ J, rtol=1e-6, atol=1e-8 * np.abs(H).max())
-    np.testing.assert_allclose(g, J.T @ r0, rtol=1e-6, atol=1e-8 * np.abs(g).max())
-    # the jump acts: its column is not zero
-    j = list(np.asarray(row.idx)).index(jump_slot)
-    assert np.abs(J[:, j]).max() > 1e-3
+    assert_normal_equations_match_differences(theta, row, case, jump_slot, h=h)
 
 
 @pytest.mark.slow

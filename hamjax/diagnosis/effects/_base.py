@@ -25,8 +25,8 @@ class StartContext(eqx.Module):
     u_std: float
     w_quantiles: dict  # quantile level -> value of the nominal output w
     dw_half: float  # half range of the nominal output's rate dw/dt (2 %/98 % rule)
-    # (S, J, gain) of the stick-slip play that fits the estimation record best on a grid
-    # (`layout.stick_slip_profile`), best first; empty when not computed
+    # (S, J, gain, jump slot) of the stick-slip variants that fit the estimation record
+    # best on a grid (`layout.stick_slip_profile`), best first; empty when not computed
     stick_slip: tuple = ()
 
 

@@ -7,6 +7,13 @@ Pottmann & Qin (2007, Fig. 3), in the parameters of Choudhury, Thornhill & Shah
 band $f_s = (S + J)/2$ and a kinetic band $f_d = (S - J)/2$. The valve stays
 where it is until the input has moved more than $f_s$ away from it, then jumps to
 within $f_d$ of the input (a jump of $J$ past the plain play operator).
+
+With a slide jump $J_c > 0$ instead (slot `slide_jump`) it is the data-driven
+model of Choudhury, Thornhill & Shah (2005, Sec. 4, Fig. 7), same $S$: after a
+slip the valve keeps sliding at $x - \\mathrm{sign}(\\dot x)(S - J_c)/2$ while its
+input keeps its direction, sticks when the input stops or reverses, and slips
+again once the input has moved from there by more than $S$ against, or $J_c$
+along, its last direction (`slide_step`).
 """
 
 import jax.numpy as jnp
@@ -52,29 +59,74 @@ def stick_slip_step(
     return jnp.where(jump > 0, slip, play_step(x_prev, v, width))
 
 
+SlideState = tuple[Float[Array, ""], Float[Array, ""], Float[Array, ""]]
+
+
+def slide_init(x0: Float[Array, ""]) -> SlideState:
+    """The state `(x_ss, direction, stuck)` of `slide_step` at rest at `x0`: stuck
+    there, no direction yet (the first motion must cross $S$)."""
+    x0 = jnp.asarray(x0)
+    return x0, jnp.zeros_like(x0), jnp.ones_like(x0)
+
+
+def slide_step(
+    y_prev: Float[Array, ""],
+    state: SlideState,
+    x_prev: Float[Array, ""],
+    x: Float[Array, ""],
+    width: Float[Array, ""],
+    jump: Float[Array, ""],
+) -> tuple[Float[Array, ""], SlideState]:
+    """One step of Choudhury et al.'s (2005, Fig. 7) valve, $S$ = `width`, $J$ =
+    `jump`: `(y, state)` from the position `y_prev`, the state `(x_ss, direction,
+    stuck)` (`slide_init`; floats, a scan carry with tangents) and the inputs
+    `x_prev`, `x`.
+
+    Sliding, it goes on at $y = x - d\\,(S - J)/2$ while $\\mathrm{sign}(x -
+    x_{prev}) = d$, else sticks with $x_{ss} = x_{prev}$; stuck, it slips to $y =
+    x - s\\,(S - J)/2$, $s = \\mathrm{sign}(x - x_{ss})$, once $|x - x_{ss}| > J$
+    ($s = d$) or $> S$ (else). Exact: $y$ moves with $S$, $J$ through $(S - J)/2$
+    only (tangents $\\mp d/2$), the instants of sticking and slipping not at all.
+    """
+    x_ss, direction, stuck = state
+    # sliding, the direction is +-1, so a still input (sign 0) does not go on;
+    # the bands are >= 0, so a slip has x != x_ss: few operations (this runs in
+    # every memory row's scan, tangents and all)
+    goes_on = (stuck < 0.5) & (jnp.sign(x - x_prev) == direction)
+    x_ss = jnp.where((stuck < 0.5) & ~goes_on, x_prev, x_ss)
+    d = jnp.sign(x - x_ss)
+    slips = ~goes_on & (jnp.abs(x - x_ss) > jnp.where(d == direction, jump, width))
+    direction = jnp.where(slips, d, direction)
+    moves = goes_on | slips
+    y = jnp.where(moves, x - direction * (width - jump) / 2, y_prev)
+    return y, (x_ss, direction, (~moves).astype(stuck.dtype))
+
+
 class BacklashEffect(AbstractEffect):
-    """Play of width $c \\ge 0$ (neutral $c = 0$) with a slip jump $J \\ge 0$
-    (neutral $J = 0$: the plain play operator)."""
+    """Play of width $c \\ge 0$ (neutral $c = 0$) with a slip jump $J \\ge 0$ (He
+    et al.) or a slide jump $J_c \\ge 0$ (Choudhury et al.), neutral $0$ each: the
+    plain play operator."""
 
     name = "backlash"
-    slots = ("backlash", "slip_jump")
-    neutral = {"backlash": 0.0, "slip_jump": 0.0}
-    positive = ("backlash", "slip_jump")
-    extension = ("slip_jump",)
+    slots = ("backlash", "slip_jump", "slide_jump")
+    neutral = {"backlash": 0.0, "slip_jump": 0.0, "slide_jump": 0.0}
+    positive = ("backlash", "slip_jump", "slide_jump")
+    extension = ("slip_jump", "slide_jump")
 
     def scales(self, ctx: StartContext) -> dict[str, float]:
         unit = 0.05 * scale_span(ctx)
-        return {"backlash": unit, "slip_jump": unit}
+        return {"backlash": unit, "slip_jump": unit, "slide_jump": unit}
 
     def starts(self, ctx: StartContext) -> list[dict[str, float]]:
         # the plain play at two widths, each with a slip jump of half of it, and
-        # the best points of the profile in (f_s, f_d) (`ctx.stick_slip`): the
+        # the best points of the profile in (f_s, f_d) of each variant
+        # (`ctx.stick_slip`, its jump's slot named; the slide only there): the
         # exact step gives f_s no derivative, and the tangents of S and J are
         # opposite (both reach x only through f_d), so a fit moves f_d at about
         # the f_s it starts from; the profile's gain starts the re-fit's gain
         plain = [{"backlash": 0.04 * span(ctx)}, {"backlash": 0.2 * span(ctx)}]
         sticky = [{**s, "slip_jump": 0.5 * s["backlash"]} for s in plain]
         profile = [
-            {"backlash": S, "slip_jump": J, "gain": g} for S, J, g in ctx.stick_slip
+            {"backlash": S, slot: J, "gain": g} for S, J, g, slot in ctx.stick_slip
         ]
         return plain + sticky + profile

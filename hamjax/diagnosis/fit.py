@@ -283,7 +283,7 @@ def _fit_flat(
 def _fit_flat_sharded(
     rows, cases, max_steps, lam0, memory=None, table=None, feedback=None
 ):
-    mesh = Mesh(np.asarray(jax.devices()), ("d",))
+    mesh = Mesh(np.asarray(jax.local_devices()), ("d",))
     spec = PartitionSpec("d")
     # `check_vma=False`: the per-device bodies are independent (no collectives);
     # each device runs its own Levenberg-Marquardt loop to its own convergence.
@@ -347,7 +347,7 @@ def fit_batch(
         np.asarray(max_steps, dtype=np.int32),
         np.asarray(lam0, dtype=float),
     )
-    n_dev = jax.device_count()
+    n_dev = jax.local_device_count()  # this process's: cases split over processes
     sharded = n_dev > 1 and rows.theta0.shape[0] % n_dev == 0
     flags = {"memory": memory, "table": table, "feedback": feedback}
     kind = "sharded" if sharded else "one"

@@ -134,7 +134,9 @@ def batch_size(preps: list[Prepared], cases_per_batch: int = CASES_PER_BATCH) ->
     """Rows per batch: the screening rows of `cases_per_batch` cases (fewer when
     the call has fewer cases), a multiple of the device count."""
     rows = max(len(p.rows) for p in preps)
-    return effective_chunk(rows * min(cases_per_batch, len(preps)), jax.device_count())
+    return effective_chunk(
+        rows * min(cases_per_batch, len(preps)), jax.local_device_count()
+    )
 
 
 def run_queue(

@@ -43,6 +43,47 @@ def add_data_folder(p: argparse.ArgumentParser) -> None:
     p.add_argument("dir", type=Path, help="experiment folder with data.csv")
 
 
+def add_cluster_arguments(p: argparse.ArgumentParser, *, how: str) -> None:
+    """`--coordinator`, `--num-processes`, `--process-id`, `--distributed`: several
+    processes through `jax.distributed` (docs/cluster.md); `how` says what they share."""
+    cluster = p.add_argument_group(
+        "several processes (docs/cluster.md)",
+        f"as jax.distributed.initialize: {how}",
+    )
+    cluster.add_argument(
+        "--coordinator", metavar="HOST:PORT", help="address of process 0"
+    )
+    cluster.add_argument(
+        "--num-processes", type=positive_int, metavar="N", help="number of processes"
+    )
+    cluster.add_argument(
+        "--process-id", type=int, metavar="I", help="this process, 0..N-1"
+    )
+    cluster.add_argument(
+        "--distributed",
+        action="store_true",
+        help="start jax.distributed with the cluster detected by JAX (SLURM, "
+        "Open MPI, ...) when --coordinator is not given",
+    )
+
+
+def start_cluster(args: argparse.Namespace) -> None:
+    """`montecarlo.distributed.initialize` with the options of
+    `add_cluster_arguments` (before any computation); a bad one is a user error."""
+    from .._errors import UserInputError
+    from ..montecarlo import distributed
+
+    try:
+        distributed.initialize(
+            coordinator=getattr(args, "coordinator", None),
+            num_processes=getattr(args, "num_processes", None),
+            process_id=getattr(args, "process_id", None),
+            auto=getattr(args, "distributed", False),
+        )
+    except ValueError as err:
+        raise UserInputError(str(err)) from None
+
+
 def optional_module(name: str) -> ModuleType | None:
     """`importlib.import_module(name)`, or None when `name` itself is not installed
     (an error inside the module, or a missing module it imports, still raises)."""

@@ -5,7 +5,17 @@ import sys
 import time
 from pathlib import Path
 
-from .._argtypes import positive_float
+from .._argtypes import positive_float, positive_int
+from ..diagnosis.schedule import CASES_PER_BATCH
+from ._common import add_cluster_arguments, start_cluster
+
+
+# Cases per `diagnose_many` call. A case's numbers depend, in their last bits, on
+# the cases fitted in the same call (padding, batch-mates), so a run goes block by
+# block, the blocks fixed by the case list alone: a case has the same batch-mates
+# whatever the number of processes. Four batches' worth: a block's last, partly
+# filled batch (one per length group) is at most a quarter of its screening work.
+BLOCK = 4 * CASES_PER_BATCH
 
 
 def register(sub) -> None:
@@ -42,12 +52,43 @@ def register(sub) -> None:
         action="store_true",
         help="replace the results of an earlier diagnosis in OUT",
     )
+    p.add_argument(
+        "--block",
+        type=positive_int,
+        default=BLOCK,
+        metavar="B",
+        help="cases diagnosed together, in blocks of the cases sorted by path "
+        f"(default {BLOCK}); a case's numbers depend, in their last bits, on the "
+        "others of its block, never on the number of processes",
+    )
+    add_cluster_arguments(
+        p,
+        how="the cases are split over the processes (block b of --block to "
+        "process b mod N); each writes the cases it owns into OUT, process 0 "
+        "prints the summary",
+    )
     p.set_defaults(func=run)
 
 
-def _plan(args: argparse.Namespace) -> tuple[list[Path], list]:
+def blocks(cases: list[Path], *, block: int = BLOCK) -> list[list[int]]:
+    """Indices of `cases` in blocks of `block`: sorted by path (then by position,
+    for a path given twice), cut into consecutive runs."""
+    order = sorted(range(len(cases)), key=lambda i: (str(cases[i]), i))
+    return [order[s : s + block] for s in range(0, len(order), block)]
+
+
+def share(
+    cases: list[Path], *, num_processes: int, process_id: int, block: int = BLOCK
+) -> list[list[int]]:
+    """The blocks of `cases` that process `process_id` of `num_processes`
+    diagnoses: block `b` goes to process `b mod num_processes`."""
+    return blocks(cases, block=block)[process_id::num_processes]
+
+
+def _plan(args: argparse.Namespace, *, notes: bool) -> tuple[list[Path], list]:
     """Output folders of the cases (in input order) and the earlier results to
-    clear; refuses a bad --out before any case is read."""
+    clear; refuses a bad --out before any case is read. `notes`: print the notes
+    on renamed outputs."""
     from ._outputs import (
         check_output_folder,
         earlier_diagnosis,
@@ -61,19 +102,22 @@ def _plan(args: argparse.Namespace) -> tuple[list[Path], list]:
     if len(args.cases) == 1:
         return [args.out], earlier
     names, notes = unique_names(args.cases, args.out)
-    for note in notes:
+    for note in notes if notes else ():
         print(f"hamjax: note: {note}", file=sys.stderr)
     return [args.out / n for n in names], earlier
 
 
-def _read_cases(args: argparse.Namespace, outs: list[Path]) -> tuple[list, int]:
-    """`(index, case, out)` of the cases that read; a bad case stops a single-case
-    run and is reported and skipped in a multi-case one."""
+def _read_cases(
+    args: argparse.Namespace, outs: list[Path], mine: list[int]
+) -> tuple[list, int]:
+    """`(index, case, out)` of the cases `mine` that read; a bad case stops a
+    single-case run and is reported and skipped in a multi-case one."""
     from .._errors import UserInputError
     from ..diagnosis.case import read_case
 
     good, failed = [], 0
-    for i, (folder, out) in enumerate(zip(args.cases, outs, strict=True)):
+    for i in sorted(mine):
+        folder, out = args.cases[i], outs[i]
         try:
             good.append((i, read_case(folder), out))
         except UserInputError as err:
@@ -122,29 +166,127 @@ def _line(name: str, d, verbose: bool) -> str:
     return line
 
 
+def _fingerprint(args: argparse.Namespace) -> int:
+    """What every process must be given alike: the cases in order and the options
+    that change a diagnosis or its outputs."""
+    from ..montecarlo.distributed import fingerprint
+
+    options = (
+        args.rule,
+        args.nominal_uncertainty,
+        args.figures,
+        args.force,
+        args.block,
+    )
+    return fingerprint([*map(str, args.cases), str(args.out), repr(options)])
+
+
+def _start(args: argparse.Namespace, me: int) -> tuple[list[Path], list]:
+    """`_plan` on every process, checked together: the same cases and options
+    everywhere, and no process refusing its --out (else all stop, in one line)."""
+    from .._errors import UserInputError
+    from ..montecarlo.distributed import allgather_ints
+
+    try:
+        plan, problem = _plan(args, notes=me == 0), None
+    except UserInputError as err:
+        plan, problem = ([], []), err
+    status = allgather_ints([_fingerprint(args), problem is not None])
+    differ = [p for p in range(len(status)) if status[p, 0] != status[0, 0]]
+    if differ:
+        raise UserInputError(
+            f"process {differ[0]} was given other cases or options than process 0 "
+            "(CASE..., --out, --block, --rule, --nominal-uncertainty, --figures "
+            "and --force must be the same on every process)"
+        )
+    if problem is not None:
+        raise problem
+    refused = [p for p in range(len(status)) if status[p, 1]]
+    if refused:
+        raise UserInputError(f"process {refused[0]} refused its --out (see its error)")
+    return plan
+
+
+def _clear(args, earlier: list, any_read: bool, me: int, n_proc: int, verbose) -> None:
+    """--force: remove the earlier results (when some case read). With several
+    processes, process 0 first, then each other one what it still sees (its own
+    --out when it is not shared), then all start, so that no fresh result is
+    removed."""
+    from ..montecarlo.distributed import allgather_ints
+    from ._outputs import earlier_diagnosis, remove_files
+
+    several = n_proc > 1
+    if not (earlier and any_read) and not several:
+        return
+    n = remove_files(earlier, args.out) if me == 0 and any_read else 0
+    if several:
+        allgather_ints([0])  # process 0 has removed its files
+        if me != 0 and any_read:
+            n = remove_files(earlier_diagnosis(args.out), args.out)
+        allgather_ints([0])  # every process has
+    if n and verbose:
+        print(f"removed {n} earlier result file(s) from {args.out}", file=sys.stderr)
+
+
 def run(args: argparse.Namespace) -> int:
     from .._runtime import split_cpu_into_devices
 
     split_cpu_into_devices()  # before the first computation
+    start_cluster(args)
+    import jax
+
+    from .._errors import UserInputError
+    from ..montecarlo.distributed import allgather_ints
+
+    quiet, verbose = getattr(args, "quiet", False), getattr(args, "verbose", False)
+    start = time.perf_counter()
+    me, n_proc = jax.process_index(), jax.process_count()
+    outs, earlier = _start(args, me)
+    mine = share(args.cases, num_processes=n_proc, process_id=me, block=args.block)
+    error, done, failed = None, 0, 0
+    try:
+        cases, failed = _read_cases(args, outs, [i for b in mine for i in b])
+    except UserInputError as err:  # one case, unreadable: every process stops
+        error, cases = err, []
+    any_read = allgather_ints([len(cases), error is not None])
+    if any_read[:, 1].any():
+        if error is not None:
+            raise error
+        raise UserInputError("process 0 could not read the case (see its error)")
+    _clear(args, earlier, bool(any_read[:, 0].any()), me, n_proc, verbose)
+    try:
+        done = _diagnose(args, cases, mine, outs, quiet, verbose)
+    except Exception as err:  # noqa: BLE001 -- re-raised once every process knows
+        error = err
+    totals = allgather_ints([done, failed, error is not None])
+    if error is not None:
+        raise error
+    if me != 0:
+        return 2 if failed else 0
+    crashed = [p for p in range(n_proc) if totals[p, 2]]
+    if crashed:
+        raise UserInputError(f"process {crashed[0]} stopped (see its error)")
+    if not quiet:
+        over = f" over {n_proc} processes" if n_proc > 1 else ""
+        print(
+            f"diagnosed {totals[:, 0].sum()} case(s){over} in "
+            f"{time.perf_counter() - start:.1f} s",
+            file=sys.stderr,
+        )
+    return 2 if totals[:, 1].any() else 0
+
+
+def _diagnose(args, cases: list, mine: list[list[int]], outs, quiet, verbose) -> int:
+    """Diagnose the cases read (`(index, case, out)`), block by block of `mine`,
+    writing each as soon as it is done; the number diagnosed."""
     from .._errors import UserInputError
     from ..diagnosis.diagnose import DiagnosisNotFinite, diagnose_many
     from ..diagnosis.nominal_fit import fit_nominal
     from ..diagnosis.report import write_diagnosis
     from ..io import model_to_dict, write_json
-    from ._outputs import remove_files
 
-    quiet, verbose = getattr(args, "quiet", False), getattr(args, "verbose", False)
-    start = time.perf_counter()
-    outs, earlier = _plan(args)
-    cases, failed = _read_cases(args, outs)
-    if cases and earlier:
-        n = remove_files(earlier, args.out)
-        if verbose:
-            print(
-                f"removed {n} earlier result file(s) from {args.out}", file=sys.stderr
-            )
-    items, where = [], []
-    for _, case, out in cases:
+    item, where = {}, {}
+    for i, case, out in cases:
         plant = case.model
         if plant is None:
             plant = fit_nominal(case.dt, case.estimation)
@@ -152,42 +294,42 @@ def run(args: argparse.Namespace) -> int:
             source = "fitted by hamjax on the estimation record (nominal_model.json)"
         else:
             source = f"given ({case.folder / 'model.json'})"
-        items.append((plant, case.dt, case.estimation, case.validation))
+        item[i] = (plant, case.dt, case.estimation, case.validation)
         name = out.name if len(outs) > 1 else case.name
-        where.append((case.folder, out, name, source))
-    printer = _InOrder(quiet, len(items))
+        where[i] = (case.folder, out, name, source)
+    rank = {i: k for k, i in enumerate(sorted(item))}  # lines in input order
+    printer = _InOrder(quiet, len(item))
+    prior = {}
+    if args.nominal_uncertainty is not None:
+        prior["nominal_uncertainty"] = args.nominal_uncertainty
+    try:
+        for block in mine:
+            members = [i for i in block if i in item]
 
-    def write(i, d):  # each case is written as soon as its chunk is done
-        folder, out, name, source = where[i]
-        write_diagnosis(d, out, name, nominal=source)
-        if args.figures:
-            from ..plotting.diagnosis import save_diagnosis_figures
+            def write(j, d, members=members):  # each case as soon as it is done
+                folder, out, name, source = where[members[j]]
+                write_diagnosis(d, out, name, nominal=source)
+                if args.figures:
+                    from ..plotting.diagnosis import save_diagnosis_figures
 
-            save_diagnosis_figures(d, out, name)
-        printer.add(i, _line(name, d, verbose))
+                    save_diagnosis_figures(d, out, name)
+                printer.add(rank[members[j]], _line(name, d, verbose))
 
-    if items:
-        try:
-            prior = {}
-            if args.nominal_uncertainty is not None:
-                prior["nominal_uncertainty"] = args.nominal_uncertainty
-            diagnose_many(
-                items,
-                on_result=write,
-                rule=args.rule,
-                **prior,
-            )
-        except DiagnosisNotFinite as err:
-            raise UserInputError(f"{where[err.index][0]}: {err}") from None
-        except ValueError as err:
-            raise UserInputError(
-                f"{args.cases[0] if len(args.cases) == 1 else 'cases'}: {err}"
-            ) from None
-        finally:
-            printer.close()
-    if not quiet:
-        print(
-            f"diagnosed {len(items)} case(s) in {time.perf_counter() - start:.1f} s",
-            file=sys.stderr,
-        )
-    return 2 if failed else 0
+            if not members:
+                continue
+            try:
+                diagnose_many(
+                    [item[i] for i in members],
+                    on_result=write,
+                    rule=args.rule,
+                    **prior,
+                )
+            except DiagnosisNotFinite as err:
+                raise UserInputError(f"{where[members[err.index]][0]}: {err}") from None
+            except ValueError as err:
+                raise UserInputError(
+                    f"{args.cases[0] if len(args.cases) == 1 else 'cases'}: {err}"
+                ) from None
+    finally:
+        printer.close()
+    return len(item)

@@ -8,7 +8,7 @@ from pathlib import Path
 
 from .._errors import UserInputError
 from ..papers import STUDY_PACKAGES
-from ._common import positive_int
+from ._common import add_cluster_arguments, positive_int, start_cluster
 
 
 _HELP = "run a registered Monte Carlo study (--list shows them)"
@@ -81,25 +81,10 @@ def add_study_arguments(parser: argparse.ArgumentParser, study) -> None:
         help=f"output folder (default results/{study.name})",
     )
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
-    cluster = parser.add_argument_group(
-        "several processes (docs/cluster.md)",
-        "as jax.distributed.initialize: the realisations are sharded over every "
-        "device of every process; process 0 writes --out",
-    )
-    cluster.add_argument(
-        "--coordinator", metavar="HOST:PORT", help="address of process 0"
-    )
-    cluster.add_argument(
-        "--num-processes", type=positive_int, metavar="N", help="number of processes"
-    )
-    cluster.add_argument(
-        "--process-id", type=int, metavar="I", help="this process, 0..N-1"
-    )
-    cluster.add_argument(
-        "--distributed",
-        action="store_true",
-        help="start jax.distributed with the cluster detected by JAX (SLURM, "
-        "Open MPI, ...) when --coordinator is not given",
+    add_cluster_arguments(
+        parser,
+        how="the realisations are sharded over every device of every process; "
+        "process 0 writes --out",
     )
     if study.add_arguments is not None:
         study.add_arguments(parser)
@@ -129,17 +114,8 @@ def run_study(study, args: argparse.Namespace) -> int:
     import jax.random as jr
 
     from .._x64 import enable_x64
-    from ..montecarlo import distributed
 
-    try:
-        distributed.initialize(
-            coordinator=getattr(args, "coordinator", None),
-            num_processes=getattr(args, "num_processes", None),
-            process_id=getattr(args, "process_id", None),
-            auto=getattr(args, "distributed", False),
-        )
-    except ValueError as err:
-        raise UserInputError(str(err)) from None
+    start_cluster(args)
     enable_x64()
     out = Path("results") / study.name if args.out is None else Path(args.out)
     if out.exists() and not out.is_dir():

@@ -4,11 +4,18 @@ Every process runs the same program; `run_monte_carlo` then shards the realisati
 axis over every device of every process. Process 0 alone reads and writes the
 output folder and tells the others which chunks are finished (so only its machine
 needs the folder); the others write their study outputs into a scratch folder.
+`hamjax diagnose` splits its cases over the processes instead (each writes the
+cases it owns); `allgather_ints` and `fingerprint` are its start and end checks.
 """
 
+import hashlib
 import os
+from collections.abc import Sequence
 
 import jax
+import numpy as np
+from jax.experimental import multihost_utils
+from jaxtyping import Int
 
 
 def initialize(
@@ -51,3 +58,21 @@ def initialize(
         process_id=process_id,
     )
     return True
+
+
+def allgather_ints(values: Sequence[int]) -> Int[np.ndarray, "processes k"]:
+    """Every process's `values` (the same length on each), row `p` from process
+    `p`: a collective that every process must call (one process: just `values`)."""
+    row = np.asarray(values, dtype=np.int64)[None]
+    if jax.process_count() == 1:
+        return row
+    return np.asarray(multihost_utils.process_allgather(row[0])).reshape(
+        jax.process_count(), -1
+    )
+
+
+def fingerprint(parts: Sequence[str]) -> int:
+    """A 62-bit hash of `parts` (SHA-256), to check with `allgather_ints` that
+    every process was given the same work."""
+    digest = hashlib.sha256("\0".join(parts).encode()).digest()
+    return int.from_bytes(digest[:8], "little") >> 2

@@ -6,16 +6,17 @@ import time
 from pathlib import Path
 
 from .._argtypes import positive_float, positive_int
-from ..diagnosis.schedule import CASES_PER_BATCH
 from ._common import add_cluster_arguments, start_cluster
 
 
-# Cases per `diagnose_many` call. A case's numbers depend, in their last bits, on
-# the cases fitted in the same call (padding, batch-mates), so a run goes block by
-# block, the blocks fixed by the case list alone: a case has the same batch-mates
-# whatever the number of processes. Four batches' worth: a block's last, partly
-# filled batch (one per length group) is at most a quarter of its screening work.
-BLOCK = 4 * CASES_PER_BATCH
+# Cases per `diagnose_many` call, in screening batches (`schedule.CASES_PER_BATCH`
+# cases each; not imported here: `hamjax --help` would load the diagnosis). A
+# case's numbers depend, in their last bits, on the cases fitted in the same call
+# (padding, batch-mates), so a run goes block by block, the blocks fixed by the
+# case list alone: a case has the same batch-mates whatever the number of
+# processes. Four batches: a block's last, partly filled batch (one per length
+# group) is at most a quarter of its screening work.
+BLOCK_BATCHES = 4
 
 
 def register(sub) -> None:
@@ -55,11 +56,11 @@ def register(sub) -> None:
     p.add_argument(
         "--block",
         type=positive_int,
-        default=BLOCK,
         metavar="B",
         help="cases diagnosed together, in blocks of the cases sorted by path "
-        f"(default {BLOCK}); a case's numbers depend, in their last bits, on the "
-        "others of its block, never on the number of processes",
+        f"(default {BLOCK_BATCHES} x hamjax.diagnosis.schedule.CASES_PER_BATCH); "
+        "a case's numbers depend, in their last bits, on the others of its "
+        "block, never on the number of processes",
     )
     add_cluster_arguments(
         p,
@@ -70,7 +71,14 @@ def register(sub) -> None:
     p.set_defaults(func=run)
 
 
-def blocks(cases: list[Path], *, block: int = BLOCK) -> list[list[int]]:
+def block_size(args: argparse.Namespace) -> int:
+    """--block, or its default."""
+    from ..diagnosis.schedule import CASES_PER_BATCH
+
+    return args.block or BLOCK_BATCHES * CASES_PER_BATCH
+
+
+def blocks(cases: list[Path], *, block: int) -> list[list[int]]:
     """Indices of `cases` in blocks of `block`: sorted by path (then by position,
     for a path given twice), cut into consecutive runs."""
     order = sorted(range(len(cases)), key=lambda i: (str(cases[i]), i))
@@ -78,7 +86,7 @@ def blocks(cases: list[Path], *, block: int = BLOCK) -> list[list[int]]:
 
 
 def share(
-    cases: list[Path], *, num_processes: int, process_id: int, block: int = BLOCK
+    cases: list[Path], *, num_processes: int, process_id: int, block: int
 ) -> list[list[int]]:
     """The blocks of `cases` that process `process_id` of `num_processes`
     diagnoses: block `b` goes to process `b mod num_processes`."""
@@ -176,7 +184,7 @@ def _fingerprint(args: argparse.Namespace) -> int:
         args.nominal_uncertainty,
         args.figures,
         args.force,
-        args.block,
+        block_size(args),
     )
     return fingerprint([*map(str, args.cases), str(args.out), repr(options)])
 
@@ -208,20 +216,19 @@ def _start(args: argparse.Namespace, me: int) -> tuple[list[Path], list]:
 
 
 def _clear(args, earlier: list, any_read: bool, me: int, n_proc: int, verbose) -> None:
-    """--force: remove the earlier results (when some case read). With several
-    processes, process 0 first, then each other one what it still sees (its own
-    --out when it is not shared), then all start, so that no fresh result is
-    removed."""
+    """--force: remove the earlier results, when some case read (`any_read` and
+    --force alike on every process). With several processes, process 0 first,
+    then each other one what it still sees (its own --out when it is not
+    shared), and only then does any process write."""
     from ..montecarlo.distributed import allgather_ints
     from ._outputs import earlier_diagnosis, remove_files
 
-    several = n_proc > 1
-    if not (earlier and any_read) and not several:
+    if not (args.force and any_read):
         return
-    n = remove_files(earlier, args.out) if me == 0 and any_read else 0
-    if several:
+    n = remove_files(earlier, args.out) if me == 0 else 0
+    if n_proc > 1:
         allgather_ints([0])  # process 0 has removed its files
-        if me != 0 and any_read:
+        if me != 0:
             n = remove_files(earlier_diagnosis(args.out), args.out)
         allgather_ints([0])  # every process has
     if n and verbose:
@@ -242,7 +249,9 @@ def run(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     me, n_proc = jax.process_index(), jax.process_count()
     outs, earlier = _start(args, me)
-    mine = share(args.cases, num_processes=n_proc, process_id=me, block=args.block)
+    mine = share(
+        args.cases, num_processes=n_proc, process_id=me, block=block_size(args)
+    )
     error, done, failed = None, 0, 0
     try:
         cases, failed = _read_cases(args, outs, [i for b in mine for i in b])

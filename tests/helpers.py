@@ -83,6 +83,30 @@ def run_on_two_devices(script: str, tmp_path, *, timeout: float = 600):
     return np.load(out)
 
 
+def child_env(devices: int) -> dict:
+    """The environment of a `python -m hamjax` child process of this checkout that
+    sees `devices` forced host CPU devices (and no GPU, no display)."""
+    import os
+    from pathlib import Path
+
+    return {
+        **os.environ,
+        "XLA_FLAGS": f"--xla_force_host_platform_device_count={devices}",
+        "JAX_PLATFORMS": "cpu",
+        "PYTHONPATH": str(Path(__file__).resolve().parents[1]),
+        "MPLBACKEND": "Agg",
+    }
+
+
+def free_port() -> int:
+    """A TCP port free on localhost now (for a `--coordinator 127.0.0.1:PORT`)."""
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
 def tree_hash(folder) -> str:
     """sha256 of every file's relative path and bytes below `folder`, in order."""
     import hashlib

@@ -2,15 +2,14 @@
 the cases split over processes by blocks of the sorted case list; 2 processes on
 localhost write every case once and exactly the 1-process files."""
 
-import os
 import re
-import socket
 import subprocess
 import sys
 from pathlib import Path
 
 import jax.random as jr
 import pytest
+from helpers import child_env, free_port
 
 from hamjax.cli.diagnose import _fingerprint, blocks, share
 from hamjax.cli.main import build_parser, main
@@ -38,28 +37,15 @@ def _cases(root: Path) -> list[Path]:
     return folders
 
 
-def _env() -> dict:
-    return {
-        **os.environ,
-        # one device per process in both runs: the device split changes rounding
-        "XLA_FLAGS": "--xla_force_host_platform_device_count=1",
-        "JAX_PLATFORMS": "cpu",
-        "PYTHONPATH": str(REPO),
-        "MPLBACKEND": "Agg",
-    }
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 def _diagnose(cases, out: Path, *extra: str) -> subprocess.Popen:
+    # XLA's compiled programs kept in one folder beside the cases, shared by the
+    # runs: the 2 processes load what the 1-process run compiled (the same
+    # programs, so the same numbers; `_runtime.use_compilation_cache`)
+    cache = {"HAMJAX_CACHE_DIR": str(cases[0].parent.parent / "xla")}
     return subprocess.Popen(
         [sys.executable, "-m", "hamjax", "diagnose", *map(str, cases)]
         + ["--out", str(out), "--block", "2", *extra],
-        env=_env(),
+        env=child_env(1) | cache,  # 1 device per process in both runs (docs/cluster.md)
         cwd=REPO,
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
@@ -81,7 +67,7 @@ def _wait(procs, timeout=240) -> list[tuple[int, str, str]]:
 
 
 def _two(cases_0, cases_1, out: Path, *extra: str):
-    cluster = ["--coordinator", f"127.0.0.1:{_free_port()}", "--num-processes", "2"]
+    cluster = ["--coordinator", f"127.0.0.1:{free_port()}", "--num-processes", "2"]
     return _wait(
         [
             _diagnose(cases, out, *cluster, "--process-id", str(i), *extra)

@@ -2,14 +2,13 @@
 collectives) gives exactly the 1-process numbers; process 0 alone writes."""
 
 import json
-import os
-import socket
 import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import child_env, free_port
 
 
 REPO = Path(__file__).resolve().parents[2]
@@ -27,26 +26,10 @@ STUDY = [
 ]
 
 
-def _env(devices: int) -> dict:
-    return {
-        **os.environ,
-        "XLA_FLAGS": f"--xla_force_host_platform_device_count={devices}",
-        "JAX_PLATFORMS": "cpu",
-        "PYTHONPATH": str(REPO),
-        "MPLBACKEND": "Agg",
-    }
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 def _study(out: Path, *extra: str, devices: int) -> subprocess.Popen:
     return subprocess.Popen(
         [sys.executable, "-m", "hamjax", "study", *STUDY, "--out", str(out), *extra],
-        env=_env(devices),
+        env=child_env(devices),
         cwd=REPO,
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
@@ -82,7 +65,7 @@ def test_two_processes_give_the_one_process_numbers(tmp_path):
     one = tmp_path / "one"
     _wait([_study(one, devices=2)])
     two = tmp_path / "two"
-    address = f"127.0.0.1:{_free_port()}"
+    address = f"127.0.0.1:{free_port()}"
     cluster = ["--coordinator", address, "--num-processes", "2"]
     procs = [_study(two, *cluster, "--process-id", str(i), devices=1) for i in (0, 1)]
     _wait(procs)
@@ -100,7 +83,7 @@ def test_two_processes_give_the_one_process_numbers(tmp_path):
 
     # Resume as 2 processes: the finished chunks are read by process 0 and shared.
     (two / "realisations" / "chunks" / next(iter(b))).unlink()
-    address = f"127.0.0.1:{_free_port()}"
+    address = f"127.0.0.1:{free_port()}"
     cluster = ["--coordinator", address, "--num-processes", "2"]
     _wait([_study(two, *cluster, "--process-id", str(i), devices=1) for i in (0, 1)])
     assert (

@@ -45,7 +45,7 @@ def _diagnose(cases, out: Path, *extra: str) -> subprocess.Popen:
     return subprocess.Popen(
         [sys.executable, "-m", "hamjax", "diagnose", *map(str, cases)]
         + ["--out", str(out), "--block", "2", *extra],
-        env=child_env(1) | cache,  # 1 device per process in both runs (docs/cluster.md)
+        env=child_env(1) | cache,  # 1 device per process in both runs
         cwd=REPO,
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,

@@ -45,14 +45,15 @@ def dominant_time_constant(den: np.ndarray, is_ct: bool, dt: float) -> float:
     roots = np.roots(np.asarray(den, float))
     if roots.size == 0:
         return 0.0
+    # decay per sample: -Re(s) dt of a continuous pole s, -ln|z| of a discrete z
     if is_ct:
-        rate = -roots.real
+        rate = -roots.real * dt
     else:
-        rate = -np.log(np.maximum(np.abs(roots), 1e-300)) * dt
+        rate = -np.log(np.maximum(np.abs(roots), 1e-300))
     rate = rate[np.isfinite(rate)]
     if np.any(rate <= 0):
         return float("inf")
-    return float(1.0 / (rate.min() * dt)) if rate.size else 0.0
+    return float(1.0 / rate.min()) if rate.size else 0.0
 
 
 SETTLING = 4.0  # time constants to settle within 2 % (e^{-4} = 0.018)

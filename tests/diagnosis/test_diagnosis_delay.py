@@ -160,7 +160,8 @@ def test_shortlist_sees_through_a_mis_set_time_constant(getkey):
     # nominal output shifted by a whole number of samples fits best well past the
     # true delay (1.5 samples); the screen's first-order re-fit of the time constant
     # keeps the true whole part.
-    v = staircase(getkey(), 2000, hold=10)
+    # (held for one time constant: the slow record where a lag passes for a shift)
+    v = staircase(getkey(), 2000, hold=40)
     y = _zoh_delayed_lag(v, 1.5, t_lag=1.25 * T_LAG)
     w = _zoh_delayed_lag(v, 0.0)
     kept = delay_shortlist(y, w, max_delay=40, t_dom=T_LAG / DT)

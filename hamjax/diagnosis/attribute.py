@@ -228,9 +228,10 @@ def _params(prep: Prepared, fit: dict, row: int, effect: str) -> dict:
         # which velocity the friction acts on: "output" (s = w) or "derivative"
         out["velocity"] = {"value": FRICTION.velocity(used), "std": 0.0}
     if effect == "time_delay":
-        tau = int(prep.rows[row][1].tau)
-        out["tau_samples"] = {"value": tau, "std": 0.0}
-        out["tau_seconds"] = {"value": tau * prep.ctx.dt, "std": 0.0}
+        tau = int(prep.rows[row][1].tau) + out.get("delay_frac", {}).get("value", 0.0)
+        std = out.get("delay_frac", {}).get("std", 0.0)
+        out["tau_samples"] = {"value": tau, "std": std}
+        out["tau_seconds"] = {"value": tau * prep.ctx.dt, "std": std * prep.ctx.dt}
     refit = {}
     for i, name in enumerate(names):
         if free[i] and name not in EFFECT_SLOTS:

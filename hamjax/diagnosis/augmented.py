@@ -53,13 +53,14 @@ from .effects.output_nonlinearity import OutputNonlinearityEffect, output_map
 from .effects.preload import PreloadEffect, add_preload
 from .effects.rate_limit import RateLimitEffect, rate_limit_step
 from .effects.saturation import SaturationEffect, saturate
-from .effects.time_delay import delay
+from .effects.time_delay import TimeDelayEffect, delay, fractional_split
 
 
 NOMINAL_SLOTS = ("k1", "k2", "d1", "d2", "l1", "l2", "in_scale", "out_scale", "gain")
 # The deterministic effects in the order of the signal chain above; each owns its
 # slots (neutral value, transform, scale) in its own file under `effects/`.
 CHAIN = (
+    TimeDelayEffect(),  # its whole part is the row's `tau`
     RateLimitEffect(),
     BacklashEffect(),
     DeadZoneEffect(),
@@ -454,12 +455,13 @@ def named(p: Float[Array, " S"], case: CaseArrays) -> Callable[[str], Array]:
 
 def filter_coefficients(p: Float[Array, " S"], case: CaseArrays) -> tuple[Array, Array]:
     """`(b, a)` of the whole linear part: the re-fitted block times the extra lag
-    $(1-p)/(1-p q^{-1})$ (linear, so folded into one filter)."""
+    $(1-p)/(1-p q^{-1})$ and the delay's fraction of a sample
+    (`time_delay.fractional_split`; linear, so folded into one filter)."""
     b, a = linear_polynomials(p, case)
     pole = jnp.clip(named(p, case)("pole"), 0.0, 0.995)
     b = jnp.convolve(b, jnp.stack([1 - pole, jnp.zeros(())]))
     a = jnp.convolve(a, jnp.stack([jnp.ones(()), -pole]))
-    return b, a
+    return fractional_split(b, a, named(p, case)("delay_frac"))
 
 
 def memory_arguments(p: Float[Array, " S"], case: CaseArrays) -> tuple:

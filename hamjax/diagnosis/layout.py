@@ -52,7 +52,7 @@ from .effects import (
 )
 from .effects._base import FLIP_SIGN, output_half_range, scale_span
 from .effects.backlash import slide_init, slide_step, stick_slip_step
-from .effects.time_delay import MAX_DELAY
+from .effects.time_delay import delay_range, delay_shortlist, dominant_time_constant
 from .locate import period_of
 from .residuals import feedback_test, noise_std_differences
 
@@ -473,7 +473,10 @@ def prepare(
         NL_TABULATED: ("out_scale",),
         NL_BACKLASH: ("out_scale",),
     }.get(nom.nl_kind, ("gain",))
-    taus_tried = _delay_shortlist(est["y"], w_est)
+    t_dom = dominant_time_constant(nom.den, nom.is_ct, dt)
+    taus_tried = delay_shortlist(
+        est["y"], w_est, max_delay=delay_range(t_dom, n_est), t_dom=t_dom
+    )
     rows = []
     for effect in DETERMINISTIC:
         taus = taus_tried if effect.name == "time_delay" else (0,)
@@ -608,17 +611,6 @@ def n_free_parameters(plant: Hammerstein) -> int:
     n_den = nom.order if nom.is_ct else nom.den.shape[0] - 1
     nl = {NL_PIECEWISE: 6, NL_TABULATED: 2, NL_BACKLASH: 2}.get(nom.nl_kind, 1)
     return n_den + nl + MAX_EFFECT_SLOTS
-
-
-def _delay_shortlist(y: np.ndarray, w: np.ndarray, keep: int = 2) -> tuple[int, ...]:
-    """The `keep` whole-sample delays whose shifted nominal output fits `y` best
-    (a cheap screen; the kept ones are then fitted with the nominal re-fit)."""
-    sse = []
-    for tau in range(1, MAX_DELAY + 1):
-        shifted = np.concatenate([np.full(tau, w[0]), w[:-tau]])
-        a = np.vdot(shifted, y) / max(np.vdot(shifted, shifted), 1e-300)
-        sse.append(np.sum((y - a * shifted) ** 2))
-    return tuple(int(i) + 1 for i in np.argsort(sse)[:keep])
 
 
 def _companion_numpy(num: np.ndarray, den: np.ndarray):

@@ -47,7 +47,9 @@ def test_each_effect_recovered_noise_free():
     assert np.isclose(_param(p["saturation"], "sat_hi"), 0.6, rtol=1e-3)
     assert np.isclose(_param(p["preload"], "preload"), 0.2, rtol=1e-3)
     assert np.isclose(_param(p["rate_limit"], "rate"), 4.0, rtol=1e-3)
-    assert _param(p["time_delay"], "tau_samples") == 3
+    # m + f with f <= UNIT_MAX = 0.995: a whole delay is reached within 0.005 from
+    # the row below it, or as f -> 0 from its own row
+    assert abs(_param(p["time_delay"], "tau_samples") - 3) < 0.01
     assert np.isclose(_param(p["extra_pole"], "pole"), 0.7, rtol=1e-3)
 
 

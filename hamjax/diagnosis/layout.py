@@ -91,7 +91,7 @@ NOMINAL_UNCERTAINTY = 0.2  # default relative std of the nominal parameters
 # valve moves), so a model with f_s 2 % above the truth misses slips and the SSE
 # has a needle of that width in f_s; f_d / f_s geometric with ratio 2**(1/3) in
 # (0.02, 0.9) (f_d = f_s: the plain play, a start of its own). Only for a record
-# that looks closed-loop (`residuals.feedback_test` on the nominal residual, at
+# that looks closed-loop (`residuals.feedback_test` on the measured output, at
 # its stated false-alarm rate): in open loop the command does not stop at the
 # slip, the SSE is not a needle in f_s, and the plain starts serve as before.
 STATIC_BAND_GRID = tuple(0.5 * 2.0 ** (-k / 64) for k in range(362))
@@ -195,12 +195,14 @@ def stick_slip_profile(
     return tuple((float(S), float(J), float(g), slot) for _, S, J, g, slot in kept)
 
 
-def _looks_closed_loop(r: np.ndarray, v: np.ndarray) -> bool:
-    """`residuals.feedback_test` of the nominal residual `r` against `v` (False
-    where it does not apply: a periodic input, a short record)."""
+def _looks_closed_loop(y: np.ndarray, v: np.ndarray) -> bool:
+    """`residuals.feedback_test` of the measured output `y` against `v` (False
+    where it does not apply: a periodic input, a short record). The output, not
+    the nominal's residual: the test's level must not depend on the nominal
+    being right, and the nominal's numerator may have a direct feedthrough."""
     if period_of(v) is not None:
         return False
-    return bool(feedback_test(r, v).get("closed_loop", False))
+    return bool(feedback_test(y, v).get("closed_loop", False))
 
 
 def _response_many(linear, x: np.ndarray, dt: float) -> np.ndarray:
@@ -422,7 +424,7 @@ def prepare(
         stick_slip=stick_slip_profile(
             nom, plant.linear, dt, np.asarray(v), np.asarray(est["y"]), L
         )
-        if _looks_closed_loop(np.asarray(est["y"]) - w_est, np.asarray(v))
+        if _looks_closed_loop(np.asarray(est["y"]), np.asarray(v))
         else (),
     )
     b_disc, ct_num, ct_pad, den_slots, den_lead, den_free = _linear_templates(nom, dt)

@@ -194,55 +194,94 @@ def _bonferroni_z(alpha: float, m: int) -> float:
     return z
 
 
-FEEDBACK_LAGS = 20  # future-input lags tested
-FEEDBACK_AR = 10  # order of the input's prewhitening AR model
+FEEDBACK_LAGS = 1  # lags 0..1 of the output tested as predictors of the input
+FEEDBACK_AR = 20  # order of the input's own autoregression (the null's predictor)
 FEEDBACK_ALPHA = 0.01  # false-alarm level of the feedback test on open-loop records
+FEEDBACK_BLOCKS = 20  # contiguous blocks of the cluster-robust covariance
+# the autoregression reaches back this many of the input's longest hold (chosen on
+# family A seed 0's open-loop records; see `feedback_test`)
+FEEDBACK_HOLDS = 1.5
+
+
+def longest_hold(v: np.ndarray) -> int:
+    """Length of the longest run of exactly equal consecutive samples of `v`."""
+    change = np.flatnonzero(np.diff(np.asarray(v)) != 0)
+    edges = np.r_[-1, change, np.asarray(v).shape[0] - 1]
+    return int(np.max(np.diff(edges)))
 
 
 def feedback_test(
-    r: np.ndarray,
+    s: np.ndarray,
     v: np.ndarray,
     *,
     max_lag: int = FEEDBACK_LAGS,
     order: int = FEEDBACK_AR,
     alpha: float = FEEDBACK_ALPHA,
+    n_blocks: int = FEEDBACK_BLOCKS,
 ) -> dict:
-    r"""Does the record look closed-loop? The test for feedback of Ljung
-    (*System Identification*, 2nd ed., §16.6): in open loop the output error $r$
-    is a function of past inputs and of noise independent of them, so it cannot
-    predict present or future inputs; a controller closing the loop makes
-    $v_{k+j}$, $j \ge 0$, react to $r_k$ (at $j = 0$ already for a controller
-    acting within the sample, the usual case). Lag 0 assumes no direct
-    feedthrough within a sample (a sampled physical plant, held input: $y_k$ is
-    measured before $v_k$ acts).
+    r"""Does the record look closed-loop? A Granger test for feedback (Ljung,
+    *System Identification*, 2nd ed., §13.4, §16.6; Granger 1969): regress the
+    input on its own past and on the output,
+    $v_k = \sum_{i=1}^{p} \alpha_i v_{k-i} + \sum_{j=0}^{q} \beta_j s_{k-j} +
+    \varepsilon_k$, and test $\beta = 0$. In open loop $v$ does not depend on the
+    noise, and $s$ (the measured output, or $y$ minus any model's response to
+    *past* inputs) is a function of past inputs plus noise independent of them:
+    it adds nothing to the prediction of $v_k$, whatever the model error, so the
+    test's level does not depend on a nominal model being right (a test on a
+    residual's correlation with future inputs does: a wrong $G$ leaves $G'v$,
+    correlated with the input's own serial structure). A controller makes $v_k$
+    a function of $s_k, s_{k-1}, \dots$ ($j = 0$: it acts within the sample,
+    the usual case; this assumes no direct feedthrough, a sampled plant with a
+    held input, so pass $y$ itself or the residual of a strictly proper model).
 
-    The input is prewhitened by a least-squares AR(`order`) model
-    $A(q)v = \varepsilon$ and $r$ is filtered by the same $A(q)$, which leaves a
-    model error $G'(q)v$ as $G'(q)\varepsilon$ (past and present $\varepsilon$
-    only); then $\rho_j = \mathrm{corr}(A r_k, \varepsilon_{k+j})$, $j = 1..$
-    `max_lag`, is about $N(0, 1/N)$ under open loop, and feedback is reported
-    when $\max_j |\rho_j|\sqrt{N}$ exceeds the two-sided Bonferroni quantile at
-    `alpha` over the lags (false-alarm rate $\le$ `alpha`). Not applicable to an
-    exactly periodic input (its future is its past): `applicable` is then False.
-    """
-    r = np.asarray(r, float) - np.mean(r)
+    The covariance of $\hat\beta$ is the cluster-robust sandwich over
+    `n_blocks` contiguous blocks (valid for heteroscedastic and serially
+    correlated $\varepsilon$ within blocks: a staircase input's AR residual is
+    both); its Wald statistic $W$ gives $F = W (B - m)/(m (B - 1))$, about
+    $F(m, B - m)$ under open loop ($m = q + 1$ tested lags; the Hotelling
+    small-sample reference for $B$ clusters), and feedback is reported when
+    $F$ exceeds its $1 - \alpha$ quantile (false-alarm rate $\alpha$).
+
+    A staircase input with (nearly) fixed holds breaks the null for a short
+    autoregression: the time since its last step predicts the next, and a slow
+    plant's output still shows that step when the input's last $p$ samples do
+    not. The order is therefore at least `FEEDBACK_HOLDS` times the longest
+    hold (`longest_hold`; at most a twentieth of the record). Not
+    applicable to an exactly periodic input (its future is its past; the caller
+    checks), a constant input, or a record too short for the regression
+    (fewer than $4(p + m)$ or $2B$ regression rows)."""
+    from scipy import stats
+
+    s = np.asarray(s, float) - np.mean(s)
     v = np.asarray(v, float) - np.mean(v)
     n = v.shape[0]
-    if n < 4 * (order + max_lag) or np.ptp(v) == 0:
+    m = max_lag + 1
+    order = max(order, min(math.ceil(FEEDBACK_HOLDS * longest_hold(v)), n // 20))
+    start = max(order, max_lag)
+    if n - start < 4 * (order + m) or n - start < 2 * n_blocks or np.ptp(v) == 0:
         return {"applicable": False, "why": "record too short or input constant"}
-    X = np.column_stack([v[order - i - 1 : n - i - 1] for i in range(order)])
-    coef, *_ = np.linalg.lstsq(X, v[order:], rcond=None)
-    eps = v[order:] - X @ coef
-    R = np.column_stack([r[order - i - 1 : n - i - 1] for i in range(order)])
-    rf = r[order:] - R @ coef
-    lags = np.arange(0, max_lag + 1)
-    rho = cross_correlation(rf, eps, lags)
-    z = float(np.max(np.abs(rho)) * math.sqrt(eps.shape[0]))
-    threshold = _bonferroni_z(alpha, lags.shape[0])
+    k = np.arange(start, n)
+    X = np.column_stack(
+        [s[k - j] for j in range(m)] + [v[k - i] for i in range(1, order + 1)]
+    )
+    target = v[k]
+    XtX_inv = np.linalg.pinv(X.T @ X)
+    beta = XtX_inv @ (X.T @ target)
+    eps = target - X @ beta
+    nb = (k.shape[0] // n_blocks) * n_blocks
+    scores = (X[:nb] * eps[:nb, None]).reshape(n_blocks, -1, X.shape[1]).sum(axis=1)
+    meat = scores.T @ scores
+    cov = (XtX_inv @ meat @ XtX_inv)[:m, :m]
+    b = beta[:m]
+    wald = float(b @ np.linalg.pinv(cov) @ b) if np.all(np.isfinite(cov)) else 0.0
+    f = wald * (n_blocks - m) / (m * (n_blocks - 1))
+    threshold = float(stats.f.isf(alpha, m, n_blocks - m))
+    t = np.abs(b) / np.sqrt(np.maximum(np.diag(cov), 1e-300))
     return {
         "applicable": True,
-        "z": z,
+        "z": f,
         "threshold": threshold,
-        "lag": int(lags[np.argmax(np.abs(rho))]),
-        "closed_loop": bool(z > threshold),
+        "p_value": float(stats.f.sf(f, m, n_blocks - m)),
+        "lag": int(np.argmax(t)),
+        "closed_loop": bool(f > threshold),
     }

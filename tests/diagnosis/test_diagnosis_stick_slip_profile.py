@@ -22,10 +22,13 @@ from hamjax.diagnosis.layout import (
 from hamjax.papers.gap import control_loops as cl
 
 
-def _sticky_loop(i: int, fs: float, fd: float, n: int = 2000, valve=None):
+def _sticky_loop(
+    i: int, fs: float, fd: float, n: int = 2000, valve=None, noise: float = 0.0
+):
     """An FOPDT process under SIMC PI control, setpoint steps every 250 samples,
-    noise-free; the valve by He et al.'s model (or `valve`). Returns the plant,
-    op, pv."""
+    noise-free unless `noise` (the std of white measurement noise on the PV, which
+    the controller reads); the valve by He et al.'s model (or `valve`). Returns
+    the plant, op, pv."""
     rng = np.random.default_rng([19, i])
     dt, p, delay = 2.0, {"K": 1.5, "tau": 60.0}, 1
     b, a = cl.discrete_process(*cl.process_tf("fopdt", p), dt, delay)
@@ -33,8 +36,9 @@ def _sticky_loop(i: int, fs: float, fd: float, n: int = 2000, valve=None):
     sp = np.repeat(rng.uniform(-3.0, 3.0, n // 250 + 1), 250)[:n]
     sp[:50] = 0.0  # from rest, as the valve model starts
     zero = np.zeros(n)
+    e = noise * np.random.default_rng([19, 1000 + i]).standard_normal(n)
     loop = cl.simulate_loop(
-        b, a, pi, dt, sp, zero, zero, valve=valve or cl.HeStiction(fs, fd, x0=0.0)
+        b, a, pi, dt, sp, zero, e, valve=valve or cl.HeStiction(fs, fd, x0=0.0)
     )
     plant = hj.Hammerstein(hj.Identity(), hj.DiscreteTransferFunction(b, a, dt))
     return plant, dt, loop["op"], loop["pv"]
@@ -64,7 +68,7 @@ def test_the_profile_finds_the_static_band_of_a_closed_loop():
 
 
 def test_an_open_loop_record_gets_no_profile():
-    # open loop (Ljung's test for feedback silent): the backlash rows keep their
+    # open loop (the test for feedback silent): the backlash rows keep their
     # plain starts only
     rng = np.random.default_rng([19, 99])
     n, dt = 2000, 1.0
@@ -76,14 +80,20 @@ def test_an_open_loop_record_gets_no_profile():
     rec = {"t": t, "v": v, "y": y}
     prep = prepare(plant, dt, rec, rec)
     assert prep.ctx.stick_slip == ()
-    plant_c, dt_c, op, pv = _sticky_loop(0, 1.0, 0.3)
-    noise = 0.01 * np.random.default_rng([19, 98]).standard_normal(pv.shape[0])
-    rec = {"t": dt_c * np.arange(op.shape[0]), "v": op, "y": pv + noise}
-    # the same kind of record from a PI loop: the profile's starts are there, the
-    # He variant's first (the loop's valve)
+    plant_c, dt_c, op, pv = _sticky_loop(0, 1.0, 0.3, noise=0.01)
+    rec = {"t": dt_c * np.arange(op.shape[0]), "v": op, "y": pv}
+    # the same kind of record from a PI loop that reads the noisy PV (a loop that
+    # no noise reaches shows no feedback to a test of it): the profile's starts
+    # are there
     found = prepare(plant_c, dt_c, rec, rec).ctx.stick_slip
-    assert len(found) == PROFILE_STARTS and found[0][3] == "slip_jump", found
+    assert len(found) == PROFILE_STARTS, found
     assert all(slot in VARIANTS for *_, slot in found)
+    # noise-free, the He variant's first (the loop's valve); with the fed-back
+    # noise the Choudhury variant's slide fits that noisy record's SSE better
+    plant_c, dt_c, op, pv = _sticky_loop(0, 1.0, 0.3)
+    nom = describe_nominal(plant_c)
+    found = stick_slip_profile(nom, plant_c.linear, dt_c, op, pv, bucket(op.shape[0]))
+    assert found[0][3] == "slip_jump", found
 
 
 def test_a_choudhury_valve_recovered_noise_free_from_the_profile_start():

@@ -48,3 +48,13 @@ def test_study_diagnoses_and_skips_without_stopping(tmp_path):
         assert row["gap_after"] <= row["gap_before"] * (1 + 1e-12)
     assert (out / "results" / "ball_beam" / "diagnosis.json").is_file()
     assert "ball_beam" in (out / "table.md").read_text()
+
+
+def test_a_subset_of_cases_is_selected_by_name():
+    from hamjax.papers.gap.studies.real_data_gap import select_cases
+
+    names = ["a", "b", "c"]
+    assert select_cases(names, "") == names
+    assert select_cases(names, "c, a") == ["a", "c"]
+    with pytest.raises(ValueError, match="no such case: d"):
+        select_cases(names, "a,d")

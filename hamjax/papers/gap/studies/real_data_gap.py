@@ -30,7 +30,23 @@ OPTIONS = (
         "folder of the real datasets (default ../shared/data/real)",
         Path,
     ),
+    StudyOption(
+        "cases",
+        "",
+        "comma-separated case names to diagnose (e.g. ced_prbs,cascaded_tanks; "
+        "default: every adapted case)",
+    ),
 )
+
+
+def select_cases(names: list[str], spec: str) -> list[str]:
+    """The case names of `spec` (comma-separated; empty: all `names`), in the order
+    of `names`; `ValueError` for a name that is not a case."""
+    wanted = [w.strip() for w in spec.split(",") if w.strip()]
+    unknown = sorted(set(wanted) - set(names))
+    if unknown:
+        raise ValueError(f"no such case: {', '.join(unknown)} (have {len(names)})")
+    return [n for n in names if not wanted or n in wanted]
 
 
 def run(key, *, realisations, chunk, out, quiet, args) -> dict:
@@ -43,9 +59,9 @@ def run(key, *, realisations, chunk, out, quiet, args) -> dict:
 
     del key  # deterministic
     out = Path(out)
-    data = option_values(args, OPTIONS).data
-    notes = write_real_cases(data, out / "cases", stiction_loops=realisations)
-    names = sorted(notes)
+    opts = option_values(args, OPTIONS)
+    notes = write_real_cases(opts.data, out / "cases", stiction_loops=realisations)
+    names = select_cases(sorted(notes), opts.cases)
     start = time.perf_counter()
     items, kept, skipped = [], [], {}
     for n in names:

@@ -18,11 +18,11 @@ from hamjax.papers.gap.demo_cases import tiny_case
 
 
 def _items():
-    """Two tiny cases that pad differently alone: 200 samples and an identity
-    map; 600 samples and the same plant written with a piecewise-linear map
+    """Two tiny cases that pad differently alone: 600 samples and an identity
+    map; 200 samples and the same plant written with a piecewise-linear map
     (identity-valued), whose rows are wider."""
-    plant, dt, est, val = tiny_case(jr.key(0), "saturation", n=200, noise=1e-3)
-    p2, _, est2, val2 = tiny_case(jr.key(1), "none", n=600, noise=1e-3)
+    plant, dt, est, val = tiny_case(jr.key(0), "saturation", n=600, noise=1e-3)
+    p2, _, est2, val2 = tiny_case(jr.key(1), "none", n=200, noise=1e-3)
     wide = Hammerstein(PiecewiseLinear(k1=1.0, k2=1.0), p2.linear)
     return [(plant, dt, est, val), (wide, dt, est2, val2)]
 
@@ -46,8 +46,9 @@ def test_a_case_alone_with_the_runs_padding_has_the_runs_numbers():
         (p, max(e["v"].shape[0], v["v"].shape[0])) for p, _, e, v in items
     )
     # the two cases do pad differently: alone, each would get a smaller padding
-    assert pad != run_padding([(items[0][0], 200)])
-    assert pad != run_padding([(items[1][0], 600)])
+    assert pad != run_padding([(items[0][0], 600)])  # narrower
+    assert pad != run_padding([(items[1][0], 200)])  # shorter
+    # (the first case alone with its own padding has other last digits: measured)
     for k in range(len(items)):
         (alone,) = diagnose_many([items[k]], padding=pad)
         assert _same(alone, whole[k]), k
@@ -55,7 +56,7 @@ def test_a_case_alone_with_the_runs_padding_has_the_runs_numbers():
 
 def test_run_padding_takes_the_widest_and_longest():
     (plant, *_), (wide, *_) = _items()
-    pad = run_padding([(plant, 200), (wide, 600), (plant, 20_000)])
+    pad = run_padding([(plant, 600), (wide, 200), (plant, 20_000)])
     assert pad.n_params == n_free_parameters(wide) > n_free_parameters(plant)
     # records up to 8192 samples share one group, padded to its longest
     assert pad.lengths == ((8192, 1024), (32768, 32768))

@@ -5,21 +5,8 @@ import sys
 import time
 from pathlib import Path
 
-from .._argtypes import positive_float, positive_int
+from .._argtypes import positive_float
 from ._common import add_cluster_arguments, start_cluster
-
-
-# Cases per `diagnose_many` call, in screening batches (`schedule.CASES_PER_BATCH`
-# cases each; not imported here: `hamjax --help` would load the diagnosis). A
-# case's numbers depend slightly on the cases fitted in the same call (padding and
-# batch-mates change rounding, and the fits stop at a tolerance: between blocks
-# of 32 and 16, 7 of 32 tiny cases differed, with the same effect, gaps, noise
-# floor and ranking order, a losing candidate's gap by up to 4e-4 relative and
-# its ill-determined parameters more), so a run goes block by block, the
-# blocks fixed by the case list alone: a case has the same batch-mates whatever
-# the number of processes. Four batches: a block's last, partly filled batch (one
-# per length group) is at most a quarter of its screening work.
-BLOCK_BATCHES = 4
 
 
 def register(sub) -> None:
@@ -56,44 +43,52 @@ def register(sub) -> None:
         action="store_true",
         help="replace the results of an earlier diagnosis in OUT",
     )
-    p.add_argument(
-        "--block",
-        type=positive_int,
-        metavar="B",
-        help="cases diagnosed together, in blocks of the cases sorted by path "
-        f"(default {BLOCK_BATCHES} x hamjax.diagnosis.schedule.CASES_PER_BATCH); "
-        "a case's numbers depend slightly on the others of its block, never on "
-        "the number of processes",
-    )
     add_cluster_arguments(
         p,
-        how="the cases are split over the processes (block b of --block to "
-        "process b mod N); each writes the cases it owns into OUT, process 0 "
-        "prints the summary",
+        how="the cases are split over the processes (case k of the cases sorted "
+        "by path to process k mod N), all padded alike so that a case's numbers do "
+        "not depend on N; each writes the cases it owns into OUT, process 0 prints "
+        "the summary",
     )
     p.set_defaults(func=run)
 
 
-def block_size(args: argparse.Namespace) -> int:
-    """--block, or its default."""
-    from ..diagnosis.schedule import CASES_PER_BATCH
-
-    return args.block or BLOCK_BATCHES * CASES_PER_BATCH
-
-
-def blocks(cases: list[Path], *, block: int) -> list[list[int]]:
-    """Indices of `cases` in blocks of `block`: sorted by path (then by position,
-    for a path given twice), cut into consecutive runs."""
+def share(cases: list[Path], *, num_processes: int, process_id: int) -> list[int]:
+    """Indices of the `cases` that process `process_id` of `num_processes`
+    diagnoses: sorted by path (then by position, for a path given twice), case
+    `k` of that order to process `k mod num_processes`."""
     order = sorted(range(len(cases)), key=lambda i: (str(cases[i]), i))
-    return [order[s : s + block] for s in range(0, len(order), block)]
+    return order[process_id::num_processes]
 
 
-def share(
-    cases: list[Path], *, num_processes: int, process_id: int, block: int
-) -> list[list[int]]:
-    """The blocks of `cases` that process `process_id` of `num_processes`
-    diagnoses: block `b` goes to process `b mod num_processes`."""
-    return blocks(cases, block=block)[process_id::num_processes]
+def _sizes(folder: Path) -> tuple | None:
+    """`(nominal or None, longer record's length)` of a case, read cheaply (the
+    records' data lines and model.json, no fit), for `run_padding`; None where
+    they do not read (the case's owner reports it and skips it)."""
+    from .._errors import UserInputError
+    from ..io import load_model
+    from ..io.csv import _content_lines
+    from ..io.files import read_text
+
+    try:
+        # the data rows `read_csv` parses: the content lines after the header
+        n = max(
+            len(_content_lines(read_text(folder / f"{name}.csv"))[0]) - 1
+            for name in ("estimation", "validation")
+        )
+        model = folder / "model.json"
+        return (load_model(model)[0] if model.exists() else None), n
+    except UserInputError:
+        return None
+
+
+def padding(cases: list[Path]):
+    """`run_padding` of the run: the same on every process, whatever their
+    number (from the whole case list, never from a fit)."""
+    from ..diagnosis.diagnose import run_padding
+
+    sizes = [_sizes(folder) for folder in sorted(set(cases), key=str)]
+    return run_padding(s for s in sizes if s is not None)
 
 
 def _plan(args: argparse.Namespace, *, notes: bool) -> tuple[list[Path], list]:
@@ -187,7 +182,6 @@ def _fingerprint(args: argparse.Namespace) -> int:
         args.nominal_uncertainty,
         args.figures,
         args.force,
-        block_size(args),
     )
     return fingerprint([*map(str, args.cases), str(args.out), repr(options)])
 
@@ -207,7 +201,7 @@ def _start(args: argparse.Namespace, me: int) -> tuple[list[Path], list]:
     if differ:
         raise UserInputError(
             f"process {differ[0]} was given other cases or options than process 0 "
-            "(CASE..., --out, --block, --rule, --nominal-uncertainty, --figures "
+            "(CASE..., --out, --rule, --nominal-uncertainty, --figures "
             "and --force must be the same on every process)"
         )
     if problem is not None:
@@ -252,12 +246,10 @@ def run(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     me, n_proc = jax.process_index(), jax.process_count()
     outs, earlier = _start(args, me)
-    mine = share(
-        args.cases, num_processes=n_proc, process_id=me, block=block_size(args)
-    )
+    mine = share(args.cases, num_processes=n_proc, process_id=me)
     error, done, failed = None, 0, 0
     try:
-        cases, failed = _read_cases(args, outs, [i for b in mine for i in b])
+        cases, failed = _read_cases(args, outs, mine)
     except UserInputError as err:  # one case, unreadable: every process stops
         error, cases = err, []
     any_read = allgather_ints([len(cases), error is not None])
@@ -267,7 +259,7 @@ def run(args: argparse.Namespace) -> int:
         raise UserInputError("process 0 could not read the case (see its error)")
     _clear(args, earlier, bool(any_read[:, 0].any()), me, n_proc, verbose)
     try:
-        done = _diagnose(args, cases, mine, outs, quiet, verbose)
+        done = _diagnose(args, cases, outs, quiet, verbose)
     except Exception as err:  # noqa: BLE001 -- re-raised once every process knows
         error = err
     totals = allgather_ints([done, failed, error is not None])
@@ -288,9 +280,10 @@ def run(args: argparse.Namespace) -> int:
     return 2 if totals[:, 1].any() else 0
 
 
-def _diagnose(args, cases: list, mine: list[list[int]], outs, quiet, verbose) -> int:
-    """Diagnose the cases read (`(index, case, out)`), block by block of `mine`,
-    writing each as soon as it is done; the number diagnosed."""
+def _diagnose(args, cases: list, outs, quiet, verbose) -> int:
+    """Diagnose the cases read (`(index, case, out)`) in one call padded as the
+    whole run (`padding`), writing each as soon as it is done; the number
+    diagnosed."""
     from .._errors import UserInputError
     from ..diagnosis.diagnose import DiagnosisNotFinite, diagnose_many
     from ..diagnosis.nominal_fit import fit_nominal
@@ -309,39 +302,38 @@ def _diagnose(args, cases: list, mine: list[list[int]], outs, quiet, verbose) ->
         item[i] = (plant, case.dt, case.estimation, case.validation)
         name = out.name if len(outs) > 1 else case.name
         where[i] = (case.folder, out, name, source)
-    rank = {i: k for k, i in enumerate(sorted(item))}  # lines in input order
+    if not item:
+        return 0
+    members = sorted(item)
+    rank = {i: k for k, i in enumerate(members)}  # lines in input order
     printer = _InOrder(quiet, len(item))
     prior = {}
     if args.nominal_uncertainty is not None:
         prior["nominal_uncertainty"] = args.nominal_uncertainty
+
+    def write(j, d):  # each case as soon as it is done
+        folder, out, name, source = where[members[j]]
+        write_diagnosis(d, out, name, nominal=source)
+        if args.figures:
+            from ..plotting.diagnosis import save_diagnosis_figures
+
+            save_diagnosis_figures(d, out, name)
+        printer.add(rank[members[j]], _line(name, d, verbose))
+
     try:
-        for block in mine:
-            members = [i for i in block if i in item]
-
-            def write(j, d, members=members):  # each case as soon as it is done
-                folder, out, name, source = where[members[j]]
-                write_diagnosis(d, out, name, nominal=source)
-                if args.figures:
-                    from ..plotting.diagnosis import save_diagnosis_figures
-
-                    save_diagnosis_figures(d, out, name)
-                printer.add(rank[members[j]], _line(name, d, verbose))
-
-            if not members:
-                continue
-            try:
-                diagnose_many(
-                    [item[i] for i in members],
-                    on_result=write,
-                    rule=args.rule,
-                    **prior,
-                )
-            except DiagnosisNotFinite as err:
-                raise UserInputError(f"{where[members[err.index]][0]}: {err}") from None
-            except ValueError as err:
-                raise UserInputError(
-                    f"{args.cases[0] if len(args.cases) == 1 else 'cases'}: {err}"
-                ) from None
+        diagnose_many(
+            [item[i] for i in members],
+            on_result=write,
+            rule=args.rule,
+            padding=padding(args.cases),
+            **prior,
+        )
+    except DiagnosisNotFinite as err:
+        raise UserInputError(f"{where[members[err.index]][0]}: {err}") from None
+    except ValueError as err:
+        raise UserInputError(
+            f"{args.cases[0] if len(args.cases) == 1 else 'cases'}: {err}"
+        ) from None
     finally:
         printer.close()
     return len(item)

@@ -3,13 +3,14 @@ shrinks once that effect is added (the contract `../shared/contracts/gap-case.md
 
 import functools as ft
 from collections import defaultdict
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
 
 import equinox as eqx
 import jax
 import numpy as np
 
-from ..models import Hammerstein
+from ..models import DiscreteTransferFunction, Hammerstein, PiecewiseLinear
 from .attribute import Attribution, attribute
 from .decide import decide
 from .layout import (
@@ -21,6 +22,7 @@ from .layout import (
 )
 from .locate import locate
 from .noise_fit import compile_in_background
+from .nominal_fit import INTEGRATING_ORDERS, ORDERS
 from .probabilities import effective_samples, probabilities
 from .schedule import CASES_PER_BATCH, batch_size, run_queue
 
@@ -84,6 +86,46 @@ def _length_group(n: int) -> int:
     # up to ONE_GROUP samples share one padded length and one compilation; longer
     # ones are grouped by powers of two (their padding is memory, not time).
     return int(2 ** np.ceil(np.log2(bucket(n))))
+
+
+def _group(n: int) -> int:
+    """The length group of a case whose longer record has `n` samples."""
+    return max(_length_group(n), ONE_GROUP)
+
+
+@dataclass(frozen=True)
+class Padding:
+    """The padding of a run: the parameter-vector width and, per length group
+    (`_group`), the padded record length. A case's numbers depend on its padding
+    (XLA's tiling, hence rounding, follows the array shapes), not on the other
+    cases fitted with it, so cases given one run's padding have the same numbers
+    whichever call diagnoses them."""
+
+    n_params: int
+    lengths: tuple[tuple[int, int], ...]  # (length group, padded length), sorted
+
+
+def _fitted_n_params() -> int:
+    """The widest nominal `nominal_fit.fit_nominal` fits: a piecewise-linear map
+    and the highest order (a stable block of max `ORDERS`, or an integrating one,
+    of max `INTEGRATING_ORDERS` + 1)."""
+    n = max(max(ORDERS), max(INTEGRATING_ORDERS) + 1)
+    lin = DiscreteTransferFunction(np.ones(n + 1), np.r_[1.0, np.zeros(n)], 1.0)
+    return n_free_parameters(Hammerstein(PiecewiseLinear(k1=1.0, k2=1.0), lin))
+
+
+def run_padding(cases: Iterable[tuple[Hammerstein | None, int]]) -> Padding:
+    """The padding of a run of `cases`, `(nominal, n)` each, `n` the longer of the
+    two records' lengths: what `diagnose_many` pads a call of these cases to. A
+    nominal None (no model.json: fitted later by `nominal_fit.fit_nominal`)
+    counts as the widest nominal that fit can return, so the padding depends on
+    each case alone, never on a fit."""
+    n_params, lengths = 0, {}
+    for plant, n in cases:
+        width = _fitted_n_params() if plant is None else n_free_parameters(plant)
+        n_params = max(n_params, width)
+        lengths[_group(n)] = max(lengths.get(_group(n), 0), _length_group(n))
+    return Padding(n_params, tuple(sorted(lengths.items())))
 
 
 def _evidence_samples(att: Attribution, mse: dict) -> float:
@@ -169,6 +211,7 @@ def diagnose_many(
     on_result: Callable[[int, GapDiagnosis], None] | None = None,
     nominal_uncertainty: float | None = NOMINAL_UNCERTAINTY,
     rule: str = DEFAULT_RULE,
+    padding: Padding | None = None,
 ) -> list[GapDiagnosis]:
     """Diagnose several cases: `(plant, dt, estimation, validation)` each, the records
     being `{"t", "v", "y"}` dicts of NumPy arrays.
@@ -183,7 +226,9 @@ def diagnose_many(
     `rule` names the decision (`RULES`: "cascade", `attribute.attribute`;
     "likelihood", `decide.decide`). `on_result(i, diagnosis)` is
     called as soon as case `i` is done, so a caller can write each result while the
-    others are still being fitted.
+    others are still being fitted. `padding`: that of a whole run (`run_padding`
+    of all its cases), so that a case split off into another call keeps its
+    numbers; None: `run_padding(items)`.
 
     **Raises:** `DiagnosisNotFinite` (its `index` the case) if a case's gaps, noise
     floor or simulated outputs are NaN or inf.
@@ -202,13 +247,17 @@ def diagnose_many(
     groups = defaultdict(list)
     # Cases alike in a batch (`fit._fit_flat`): by map kind, then by length.
     for i in sorted(range(len(items)), key=lambda i: (kinds[i], lengths[i])):
-        groups[max(_length_group(lengths[i]), ONE_GROUP)].append(i)
-    n_params = max(n_free_parameters(plant) for plant, *_ in items)
+        groups[_group(lengths[i])].append(i)
+    own = run_padding((plant, n) for (plant, *_), n in zip(items, lengths, strict=True))
+    padding = padding or own
+    n_params, padded = padding.n_params, dict(padding.lengths)
+    if n_params < own.n_params or any(padded.get(g, 0) < n for g, n in own.lengths):
+        raise ValueError(f"the cases do not fit in {padding} (run_padding: {own})")
     # the noise models compile while the fits do (once per call)
     overlap = ft.cache(ft.partial(compile_in_background, lengths))
     out: list = [None] * len(items)
-    for members in groups.values():
-        length = max(_length_group(lengths[i]) for i in members)
+    for group, members in groups.items():
+        length = padded[group]
         preps = [
             prepare(
                 *items[i],  # type: ignore[arg-type]

@@ -1,6 +1,7 @@
 """`hamjax diagnose CASE... --coordinator ... --num-processes N --process-id I`:
-the cases split over processes by blocks of the sorted case list; 2 processes on
-localhost write every case once and exactly the 1-process files."""
+case k of the sorted case list to process k mod N, every process padding as the
+whole run; 2 processes on localhost write every case once and exactly the
+1-process files."""
 
 import re
 import subprocess
@@ -11,24 +12,34 @@ import jax.random as jr
 import pytest
 from helpers import child_env, free_port
 
-from hamjax.cli.diagnose import _fingerprint, blocks, share
+from hamjax.cli.diagnose import _fingerprint, _sizes, padding, share
 from hamjax.cli.main import build_parser, main
+from hamjax.diagnosis.case import read_case
+from hamjax.diagnosis.diagnose import run_padding
 from hamjax.io import model_to_dict, write_csv, write_json
+from hamjax.models import Hammerstein, PiecewiseLinear
 from hamjax.papers.gap.demo_cases import tiny_case
 
 
 REPO = Path(__file__).resolve().parents[2]
 EFFECTS = ("saturation", "none", "backlash")
+SAMPLES = (200, 200, 600)
 
 
 def _cases(root: Path) -> list[Path]:
-    """Three tiny cases; the last without model.json (its nominal model is fitted
-    and written by the process that owns it)."""
+    """Three tiny cases that pad differently alone: the first with an identity
+    map, the second with the same plant written with an (identity-valued)
+    piecewise-linear map, whose rows are wider, the last longer and without
+    model.json (its nominal model is fitted and written by the process that owns
+    it). Split over 2 processes (c0, c2 | c1), each process's own padding differs
+    from the whole run's."""
     folders = []
-    for k, effect in enumerate(EFFECTS):
-        plant, dt, est, val = tiny_case(jr.key(k), effect, n=300, noise=1e-3)
+    for k, (effect, n) in enumerate(zip(EFFECTS, SAMPLES, strict=True)):
+        plant, dt, est, val = tiny_case(jr.key(k), effect, n=n, noise=1e-3)
         folder = root / f"c{k}_{effect}"
         folder.mkdir(parents=True)
+        if k == 1:
+            plant = Hammerstein(PiecewiseLinear(k1=1.0, k2=1.0), plant.linear)
         if k < len(EFFECTS) - 1:
             write_json(folder / "model.json", model_to_dict(plant, dt))
         write_csv(folder / "estimation.csv", est)
@@ -44,7 +55,7 @@ def _diagnose(cases, out: Path, *extra: str) -> subprocess.Popen:
     cache = {"HAMJAX_CACHE_DIR": str(cases[0].parent.parent / "xla")}
     return subprocess.Popen(
         [sys.executable, "-m", "hamjax", "diagnose", *map(str, cases)]
-        + ["--out", str(out), "--block", "2", *extra],
+        + ["--out", str(out), *extra],
         env=child_env(1) | cache,  # 1 device per process in both runs
         cwd=REPO,
         stdout=subprocess.PIPE,
@@ -98,44 +109,63 @@ def test_two_processes_write_the_one_process_files(tmp_path):
     one_files, two_files = _files(tmp_path / "one"), _files(tmp_path / "two")
     assert len(one_files) == 2 * len(EFFECTS) + 1  # + nominal_model.json once
     assert two_files == one_files  # every file, byte for byte
-    # Each case diagnosed by one process, that of its block (block b -> b mod 2).
+    # Each case diagnosed by one process (case k of the sorted list -> k mod 2),
+    # whose own padding is not the whole run's: the run's padding was used.
     printed = [_named(out + err) for _, out, err in two]
-    owners = share(cases, num_processes=2, process_id=0, block=2)
-    assert printed[0] == {cases[i].name for b in owners for i in b}
+    owners = share(cases, num_processes=2, process_id=0)
+    assert printed[0] == {cases[i].name for i in owners}
+    (alone,) = share(cases, num_processes=2, process_id=1)
+    assert padding([cases[alone]]) != padding(cases)
     assert printed[0] | printed[1] == {c.name for c in cases}
     assert not printed[0] & printed[1]
     assert f"diagnosed {len(cases)} case(s) over 2 processes" in two[0][2]
 
-    # An OUT holding results is refused by every process, as by one.
-    again = _two(cases, cases, tmp_path / "two")
-    assert [r[0] for r in again] == [2, 2]
-    assert all("--force" in err.splitlines()[-1] for *_, err in again)
-    # Processes given different case lists stop at the start, in one line.
-    mixed = _two(cases, cases[::-1], tmp_path / "mixed")
+    # Processes given different case lists stop at the start, in one line, before
+    # anything else (here an OUT holding results, refused otherwise), and leave
+    # OUT as it was (one phase, to keep the test short).
+    mixed = _two(cases, cases[::-1], tmp_path / "two")
     assert [r[0] for r in mixed] == [2, 2]
     for *_, err in mixed:
         assert "other cases or options than process 0" in err.splitlines()[-1]
-    assert not (tmp_path / "mixed").exists() or not _files(tmp_path / "mixed")
+    assert _files(tmp_path / "two") == one_files
 
 
-def test_blocks_cover_every_case_once_whatever_the_order_and_count():
+def test_share_covers_every_case_once_whatever_the_order_and_count():
     cases = [Path(f"data/case{k % 7}") for k in (5, 3, 0, 6, 1, 4, 2, 3, 9, 8)]
-    cut = blocks(cases, block=3)
-    # consecutive runs of the sorted paths (a path given twice: by position)
-    flat = [i for b in cut for i in b]
-    assert flat == sorted(range(len(cases)), key=lambda i: (str(cases[i]), i))
-    assert [len(b) for b in cut] == [3, 3, 3, 1]
-    for n in (1, 2, 3, 5):
-        shares = [
-            share(cases, num_processes=n, process_id=p, block=3) for p in range(n)
-        ]
-        # block b, the same whatever n, goes to process b mod n
-        assert shares == [cut[p::n] for p in range(n)]
-        assert sorted(i for s in shares for b in s for i in b) == list(range(10))
-    # reordering the input moves no path to another block
+    # sorted by path (a path given twice: by position), dealt out in turn
+    order = sorted(range(len(cases)), key=lambda i: (str(cases[i]), i))
+    for n in (1, 2, 3, 5, 12):
+        shares = [share(cases, num_processes=n, process_id=p) for p in range(n)]
+        assert shares == [order[p::n] for p in range(n)]
+        assert sorted(i for s in shares for i in s) == list(range(10))
+        assert max(map(len, shares)) - min(map(len, shares)) <= 1
+    # a path's process follows from the paths alone, not from the input order
     shuffled = [cases[i] for i in (9, 0, 8, 1, 7, 2, 6, 3, 5, 4)]
-    as_paths = lambda cs, cut: [sorted(map(str, (cs[i] for i in b))) for b in cut]  # noqa: E731
-    assert as_paths(shuffled, blocks(shuffled, block=3)) == as_paths(cases, cut)
+    as_paths = lambda cs: [str(cs[i]) for i in share(cs, num_processes=3, process_id=1)]  # noqa: E731
+    assert sorted(as_paths(shuffled)) == sorted(as_paths(cases))
+
+
+def test_padding_from_the_case_list_alone(tmp_path):
+    cases = _cases(tmp_path / "cases")
+    # a comment and a blank line: `_sizes` counts the rows `read_case` reads
+    est = cases[0] / "estimation.csv"
+    lines = est.read_text().splitlines()
+    est.write_text("\n".join([lines[0], "# note", "", *lines[1:]]) + "\n")
+    sizes = []
+    for c in cases:
+        r = read_case(c)
+        sizes.append((r.model, max(r.estimation["v"].size, r.validation["v"].size)))
+        nominal, n = _sizes(c)
+        assert n == sizes[-1][1]
+        assert (nominal is None) == (r.model is None)
+        if nominal is not None:
+            assert model_to_dict(nominal, r.dt) == model_to_dict(r.model, r.dt)
+    assert sizes[2] == (None, SAMPLES[2])
+    # the nominals as read, the unfitted one bounded (`run_padding`)
+    whole = run_padding(sizes)
+    assert padding(cases) == whole
+    # whatever the order, repeats or an unreadable folder in the list
+    assert padding([*cases[::-1], cases[0], tmp_path / "missing"]) == whole
 
 
 def test_fingerprint_sees_cases_order_and_options(tmp_path):
@@ -147,7 +177,6 @@ def test_fingerprint_sees_cases_order_and_options(tmp_path):
         ["diagnose", "b", "a", "--out", str(tmp_path)],
         ["diagnose", "a", "b", "a", "--out", str(tmp_path)],
         [*base, "--rule", "likelihood"],
-        [*base, "--block", "3"],
         [*base, "--nominal-uncertainty", "0.1"],
         ["diagnose", "a", "b", "--out", str(tmp_path / "x")],
     ):

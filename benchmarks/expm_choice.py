@@ -23,7 +23,7 @@ import jax.scipy.linalg as jsl
 import numpy as np
 
 import hamjax
-from hamjax.simulation.filters import expm as taylor_expm
+from hamjax.simulation.filters import expm_taylor as taylor_expm
 
 
 def _median_time(f, repeats: int) -> float:

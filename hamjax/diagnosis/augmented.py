@@ -41,7 +41,7 @@ from jaxtyping import Array, Bool, Float, Int
 from .._linalg import charpoly_adjugate
 from ..models.nonlinearities.backlash import Backlash, BacklashState
 from ..models.nonlinearities.piecewise_linear import piecewise_linear_map
-from ..simulation.filters import df2t_step, filter_scan, zoh_tf
+from ..simulation.filters import df2t_step, expm_taylor, filter_scan, zoh_tf
 from .effects._base import UNIT_MAX, StartContext, unit_raw
 from .effects.backlash import BacklashEffect, slide_init, slide_step, stick_slip_step
 from .effects.dead_zone import DeadZoneEffect, dead_zone
@@ -173,7 +173,7 @@ def linear_polynomials(p: Float[Array, " S"], case: CaseArrays) -> tuple[Array, 
     a_disc = jnp.concatenate([jnp.ones(1), den])
     den_ct = jnp.convolve(jnp.concatenate([case.den_lead[None], den]), case.ct_pad)
     den_ct = den_ct[-(n_max + 1) :]
-    Ad, Bd, Cc, Dc = zoh_tf(g * case.ct_num, den_ct, case.dt)
+    Ad, Bd, Cc, Dc = zoh_tf(g * case.ct_num, den_ct, case.dt, expm=expm_taylor)
     c, Ms = charpoly_adjugate(Ad)
     # b_j = C M_j B + D c_j (coefficient of z^{n-j}), j = 1..n
     cmb = jnp.einsum("i,kij,j->k", Cc[0], Ms, Bd[:, 0])

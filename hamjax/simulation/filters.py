@@ -10,11 +10,13 @@ augmented model and its host-side nominal responses.
 This module imports no other part of hamjax: `hamjax.models` imports it.
 """
 
+from collections.abc import Callable
 from functools import partial
 
 import jax
 import jax.lax as lax
 import jax.numpy as jnp
+import jax.scipy.linalg as jsl
 import numpy as np
 import scipy.linalg
 from jaxtyping import Array, Float
@@ -56,21 +58,25 @@ def companion(num, den, *, xp=jnp) -> tuple[Array, Array, Array, Array]:
 
 
 @partial(jax.jit, static_argnames=("squarings", "order"))
-def expm(
+def expm_taylor(
     M: Float[Array, "n n"], *, squarings: int = 12, order: int = 10
 ) -> Float[Array, "n n"]:
     r"""Matrix exponential by a fixed Taylor series of $M / 2^s$ and $s$ squarings.
 
     No data-dependent branches, so it compiles small under `vmap`/`jvp`; exact to
-    rounding for $\|M\| \lesssim 10^3$, far beyond any sensible $|p|\,dt$ (7e-13
-    relative to `jax.scipy.linalg.expm` on 5x5 normal matrices). Measured by
-    `benchmarks/expm_choice.py` (this shared 2-core machine, batch 512): under
-    `jit(vmap(jvp))` on the diagnosis's 5x5 matrices it compiles in 1.3-2.5 s
-    against 7.3-7.7 s for `jax.scipy.linalg.expm` (Padé with a branch on the norm,
-    every branch computed under `vmap`), and runs in 40-45 ms against 19-65 ms
-    (noisy). Jitted: called eagerly (`discretise` outside `jit`) its loops were
-    compiled anew on every call (0.6 s each); jitted, 0.007 ms. Inside a traced
-    function the call is inlined.
+    rounding for $\|M\| \lesssim 10^3$ (7e-13 relative to
+    `jax.scipy.linalg.expm` on 5x5 normal matrices, the 12 fixed squarings
+    multiplying the series' rounding). Measured by `benchmarks/expm_choice.py`
+    (this shared 2-core machine, batch 512): under `jit(vmap(jvp))` on the
+    diagnosis's 5x5 matrices it compiles in 1.3-2.5 s against 7.3-7.7 s for
+    `jax.scipy.linalg.expm` (Padé with a branch on the norm, every branch computed
+    under `vmap`) and runs in 40-45 ms against 19-65 ms (noisy): the augmented
+    model's choice (`zoh(..., expm=expm_taylor)`), inside every Levenberg-Marquardt
+    step. It is not `zoh`'s default: the fixed squarings leave rounding noise of
+    ~1e-12 that a central difference with step 1e-6 turns into 6.5e-6 relative
+    error (`test_grad_wrt_continuous_num_den` failed with it); Padé scales by the
+    norm and is exact to rounding. Jitted: called eagerly its loops were compiled
+    anew on every call (0.6 s each; jitted, 0.007 ms).
     """
     A = M / 2.0**squarings
 
@@ -87,13 +93,19 @@ def expm(
 
 
 def zoh(
-    A: Float[Array, "n n"], B: Float[Array, "n 1"], dt, *, xp=jnp
+    A: Float[Array, "n n"],
+    B: Float[Array, "n 1"],
+    dt,
+    *,
+    xp=jnp,
+    expm: Callable[[Array], Array] = jsl.expm,
 ) -> tuple[Float[Array, "n n"], Float[Array, "n 1"]]:
     r"""Exact zero-order hold of $\dot x = A x + B u$ at sampling period `dt`:
     $\exp\begin{pmatrix} A\,dt & B\,dt \\ 0 & 0 \end{pmatrix} =
     \begin{pmatrix} A_d & B_d \\ 0 & 1 \end{pmatrix}$.
 
-    `xp=numpy` runs `scipy.linalg.expm` on the host: the diagnosis discretises
+    `expm`: the matrix exponential (traced; `expm_taylor` compiles smaller under
+    `vmap`). `xp=numpy` runs `scipy.linalg.expm` on the host: the diagnosis discretises
     every continuous nominal once per case, and the JAX form compiled anew for
     each (~1 s per continuous case)."""
     n = A.shape[0]
@@ -107,11 +119,13 @@ def zoh(
     return E[:n, :n], E[:n, n:]
 
 
-def zoh_tf(num, den, dt, *, xp=jnp) -> tuple[Array, Array, Array, Array]:
+def zoh_tf(
+    num, den, dt, *, xp=jnp, expm: Callable[[Array], Array] = jsl.expm
+) -> tuple[Array, Array, Array, Array]:
     """The state space `(A_d, B_d, C, D)` of the proper continuous $\\text{num}/
     \\text{den}$ held over each sample: `zoh` of its `companion` form."""
     A, B, C, D = companion(num, den, xp=xp)
-    Ad, Bd = zoh(A, B, dt, xp=xp)
+    Ad, Bd = zoh(A, B, dt, xp=xp, expm=expm)
     return Ad, Bd, C, D
 
 

@@ -105,9 +105,9 @@ def zoh(
     \begin{pmatrix} A_d & B_d \\ 0 & 1 \end{pmatrix}$.
 
     `expm`: the matrix exponential (traced; `expm_taylor` compiles smaller under
-    `vmap`). `xp=numpy` runs `scipy.linalg.expm` on the host: the diagnosis discretises
-    every continuous nominal once per case, and the JAX form compiled anew for
-    each (~1 s per continuous case)."""
+    `vmap`). `xp=numpy` runs `scipy.linalg.expm` on the host: the diagnosis
+    discretises every continuous nominal once per case, and the JAX form compiled
+    anew for each (~1 s per continuous case, measured when the twin was written)."""
     n = A.shape[0]
     if xp is np:
         M = np.zeros((n + 1, n + 1))
@@ -130,15 +130,13 @@ def zoh_tf(
 
 
 def df2t_step(
-    b: Float[Array, " n1"],
-    a: Float[Array, " n1"],
-    z: Float[Array, " n *batch"],
-    u: Float[Array, "*batch"],
+    b: Float[Array, " n1"], a: Float[Array, " n1"], z: Float[Array, " n *batch"], u
 ) -> tuple[Float[Array, " n *batch"], Float[Array, "*batch"]]:
     r"""One sample of direct form II transposed for `b`, `a` of equal length
-    (`a[0] = 1`): $y_k = b_0 u_k + z_0$, then $z \leftarrow$ (z shifted up)
-    $+ b_{1:} u_k - a_{1:} y_k$. `u` may carry batch axes (the state has them after
-    its own). A length-1 `b` is a static gain (the state stays at zero)."""
+    (`a[0] = 1`) at the input sample `u`: $y_k = b_0 u_k + z_0$, then
+    $z \leftarrow$ (z shifted up) $+ b_{1:} u_k - a_{1:} y_k$. `u` may carry batch
+    axes (the state has them after its own). A length-1 `b` is a static gain (the
+    state stays at zero)."""
     if b.shape[0] == 1:
         return z, b[0] * u
     y = b[0] * u + z[0]

@@ -11,9 +11,7 @@ This module imports no other part of hamjax: `hamjax.models` imports it.
 """
 
 from collections.abc import Callable
-from functools import partial
 
-import jax
 import jax.lax as lax
 import jax.numpy as jnp
 import jax.scipy.linalg as jsl
@@ -57,7 +55,6 @@ def companion(num, den, *, xp=jnp) -> tuple[Array, Array, Array, Array]:
     return A, B, C, xp.reshape(d, (1, 1))
 
 
-@partial(jax.jit, static_argnames=("squarings", "order"))
 def expm_taylor(
     M: Float[Array, "n n"], *, squarings: int = 12, order: int = 10
 ) -> Float[Array, "n n"]:
@@ -75,8 +72,9 @@ def expm_taylor(
     step. It is not `zoh`'s default: the fixed squarings leave rounding noise of
     ~1e-12 that a central difference with step 1e-6 turns into 6.5e-6 relative
     error (`test_grad_wrt_continuous_num_den` failed with it); Padé scales by the
-    norm and is exact to rounding. Jitted: called eagerly its loops were compiled
-    anew on every call (0.6 s each; jitted, 0.007 ms).
+    norm and is exact to rounding. Not jitted, so the augmented model's traced
+    program is the one it had (called eagerly, its loops compile on every call:
+    0.6 s each, measured; jitted, 0.007 ms).
     """
     A = M / 2.0**squarings
 

@@ -38,3 +38,25 @@ def cholesky_solve(
     y = lax.fori_loop(0, n, forward, jnp.zeros_like(x))
     z = lax.fori_loop(0, n, backward, jnp.zeros_like(x))
     return z[:, 0] if b.ndim == 1 else z
+
+
+def charpoly_adjugate(A: Array) -> tuple[Array, Array]:
+    """Faddeev-LeVerrier: monic char. poly (highest power first) and the matrices
+    $M_k$ with $\\mathrm{adj}(zI - A) = \\sum_k M_k z^{n-k}$ (products only, so it
+    differentiates cleanly; no LAPACK call). With them a state space $(A, B, C, D)$
+    has the transfer function $(C\\,\\mathrm{adj}(zI - A) B + D \\det(zI - A)) /
+    \\det(zI - A)$."""
+    n = A.shape[0]
+    eye = jnp.eye(n, dtype=A.dtype)
+
+    def step(k, carry):  # k = 1..n
+        M, c, Ms = carry
+        M = A @ M + c[k - 1] * eye
+        c = c.at[k].set(-jnp.trace(A @ M) / k.astype(A.dtype))
+        return M, c, Ms.at[k - 1].set(M)
+
+    c0 = jnp.zeros(n + 1, A.dtype).at[0].set(1.0)
+    _, c, Ms = lax.fori_loop(
+        1, n + 1, step, (jnp.zeros_like(A), c0, jnp.zeros((n, n, n), A.dtype))
+    )
+    return c, Ms

@@ -38,8 +38,10 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
+from .._linalg import charpoly_adjugate
 from ..models.nonlinearities.backlash import Backlash, BacklashState
 from ..models.nonlinearities.piecewise_linear import piecewise_linear_map
+from ..simulation.filters import df2t_step, expm_taylor, filter_scan, zoh_tf
 from .effects._base import UNIT_MAX, StartContext, unit_raw
 from .effects.backlash import BacklashEffect, slide_init, slide_step, stick_slip_step
 from .effects.dead_zone import DeadZoneEffect, dead_zone
@@ -160,53 +162,6 @@ def full_parameters(
     return jnp.where(row.free, phys, case.neutral)
 
 
-def _expm(M: Array, squarings: int = 12, order: int = 10) -> Array:
-    """Matrix exponential by a fixed Taylor series and squaring (no data-dependent
-    branches, so it compiles small under `vmap`/`jvp`; exact to rounding for
-    $\\|M\\| \\lesssim 10^3$, far beyond any sensible $|p|\\,dt$)."""
-    A = M / 2.0**squarings
-
-    def taylor(k, carry):  # term_k = term_{k-1} A / k
-        term, E = carry
-        term = term @ A / k.astype(M.dtype)
-        return term, E + term
-
-    eye = jnp.eye(M.shape[0], dtype=M.dtype)
-    # Loops rather than unrolled products: the same arithmetic, a fraction of the
-    # compiled program (this sits inside every Levenberg-Marquardt step).
-    _, E = lax.fori_loop(1, order + 1, taylor, (eye, eye))
-    return lax.fori_loop(0, squarings, lambda _, E: E @ E, E)
-
-
-def _companion(num: Array, den: Array) -> tuple[Array, Array, Array, Array]:
-    """Controllable canonical form of num/den (equal lengths, den monic)."""
-    n = den.shape[0] - 1
-    A = jnp.concatenate([-den[1:][None, :], jnp.eye(n - 1, n)], axis=0)
-    B = jnp.eye(n, 1)
-    C = (num[1:] - den[1:] * num[0])[None, :]
-    return A, B, C, num[0]
-
-
-def _charpoly_adjugate(A: Array) -> tuple[Array, Array]:
-    """Faddeev-LeVerrier: monic char. poly (highest power first) and the matrices
-    $M_k$ with $\\mathrm{adj}(zI - A) = \\sum_k M_k z^{n-k}$ (products only, so it
-    differentiates cleanly)."""
-    n = A.shape[0]
-    eye = jnp.eye(n, dtype=A.dtype)
-
-    def step(k, carry):  # k = 1..n
-        M, c, Ms = carry
-        M = A @ M + c[k - 1] * eye
-        c = c.at[k].set(-jnp.trace(A @ M) / k.astype(A.dtype))
-        return M, c, Ms.at[k - 1].set(M)
-
-    c0 = jnp.zeros(n + 1, A.dtype).at[0].set(1.0)
-    _, c, Ms = lax.fori_loop(
-        1, n + 1, step, (jnp.zeros_like(A), c0, jnp.zeros((n, n, n), A.dtype))
-    )
-    return c, Ms
-
-
 def linear_polynomials(p: Float[Array, " S"], case: CaseArrays) -> tuple[Array, Array]:
     """Discrete `(b, a)` in $q^{-1}$ of the re-fitted linear block, length `n_max + 1`.
 
@@ -219,15 +174,11 @@ def linear_polynomials(p: Float[Array, " S"], case: CaseArrays) -> tuple[Array, 
     a_disc = jnp.concatenate([jnp.ones(1), den])
     den_ct = jnp.convolve(jnp.concatenate([case.den_lead[None], den]), case.ct_pad)
     den_ct = den_ct[-(n_max + 1) :]
-    Ac, Bc, Cc, Dc = _companion(g * case.ct_num, den_ct)
-    M = jnp.zeros((n_max + 1, n_max + 1))
-    M = M.at[:n_max, :n_max].set(Ac * case.dt).at[:n_max, n_max:].set(Bc * case.dt)
-    E = _expm(M)
-    Ad, Bd = E[:n_max, :n_max], E[:n_max, n_max:]
-    c, Ms = _charpoly_adjugate(Ad)
+    Ad, Bd, Cc, Dc = zoh_tf(g * case.ct_num, den_ct, case.dt, expm=expm_taylor)
+    c, Ms = charpoly_adjugate(Ad)
     # b_j = C M_j B + D c_j (coefficient of z^{n-j}), j = 1..n
     cmb = jnp.einsum("i,kij,j->k", Cc[0], Ms, Bd[:, 0])
-    b_ct = jnp.concatenate([Dc[None], cmb + Dc * c[1:]])
+    b_ct = jnp.concatenate([Dc[0], cmb + Dc[0, 0] * c[1:]])
     ct = case.is_ct > 0.5
     return jnp.where(ct, b_ct, g * case.b_disc), jnp.where(ct, c, a_disc)
 
@@ -246,23 +197,6 @@ def switch(flag: bool | Bool[Array, ""], on: Callable, off: Callable, *args):
 def _table(v: Array, p: Float[Array, " S"], case: CaseArrays) -> Array:
     si, so = p[NOMINAL_SLOTS.index("in_scale")], p[NOMINAL_SLOTS.index("out_scale")]
     return so * jnp.interp(si * v, case.tab_v, case.tab_u)
-
-
-def filter_scan(
-    b: Array, a: Array, u: Float[Array, " B"], z: Float[Array, " n"]
-) -> tuple[Float[Array, " n"], Float[Array, " B"]]:
-    """Direct form II transposed from state `z`: `(z_end, w)`; from `z = 0` this is
-    `scipy.signal.lfilter(b, a, u)`, and chaining the state over consecutive
-    blocks of `u` gives the same output as one call on the whole record."""
-
-    return lax.scan(lambda z, uk: _df2t_step(b, a, z, uk), z, u, unroll=1)
-
-
-def _df2t_step(b: Array, a: Array, z: Array, uk: Array) -> tuple[Array, Array]:
-    """One step of direct form II transposed: `(z_next, y_k)`."""
-    yk = b[0] * uk + z[0]
-    z = jnp.concatenate([z[1:], jnp.zeros(1, z.dtype)]) + b[1:] * uk - a[1:] * yk
-    return z, yk
 
 
 BISECTIONS = 20  # halvings of the friction step's bracket (`feedback_scan`)
@@ -319,7 +253,7 @@ def feedback_scan(
             return u - g0 / slope
 
         uk = newton(lax.stop_gradient(newton(0.5 * (lo + hi))))
-        return _df2t_step(b, a, z, uk)
+        return df2t_step(b, a, z, uk)
 
     return lax.scan(step, z, s, unroll=1)
 

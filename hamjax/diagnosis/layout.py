@@ -7,7 +7,6 @@ from functools import partial
 import jax
 import jax.numpy as jnp
 import numpy as np
-import scipy.linalg
 from jax import lax
 from jaxtyping import Array, Float
 
@@ -22,6 +21,7 @@ from ..models import (
 )
 from ..models.hammerstein import fold_output_scale
 from ..models.nonlinearities.piecewise_linear import piecewise_linear_map
+from ..simulation.filters import lfilter_numpy, zoh_tf
 from .augmented import (
     EFFECT_NEUTRAL,
     EFFECT_SLOTS,
@@ -210,12 +210,12 @@ def _response_many(linear, x: np.ndarray, dt: float) -> np.ndarray:
     from scipy import signal
 
     if isinstance(linear, ContinuousTransferFunction):
-        A, B, C, D = _zoh_numpy(np.asarray(linear.num), np.asarray(linear.den), dt)
-        b, a = signal.ss2tf(A, B, C, D)
+        ss = zoh_tf(np.asarray(linear.num), np.asarray(linear.den), dt, xp=np)
+        b, a = signal.ss2tf(*ss)
         b, a = np.asarray(b[0], float), np.asarray(a, float)
     else:
         b, a = np.asarray(linear.b, float), np.asarray(linear.a, float)
-    return signal.lfilter(b, a, x, axis=1)
+    return lfilter_numpy(b, a, x)
 
 
 def bucket(n: int) -> int:
@@ -615,59 +615,16 @@ def n_free_parameters(plant: Hammerstein) -> int:
     return n_den + nl + MAX_EFFECT_SLOTS
 
 
-def _companion_numpy(num: np.ndarray, den: np.ndarray):
-    """Controllable canonical form of `num/den` (highest power first, proper)."""
-    den = np.asarray(den, float)
-    num = np.asarray(num, float) / den[0]
-    den = den / den[0]
-    n = den.shape[0] - 1
-    num = np.concatenate([np.zeros(n + 1 - num.shape[0]), num])
-    A = np.zeros((n, n))
-    A[0] = -den[1:]
-    A[1:, :-1] = np.eye(n - 1)
-    B = np.eye(n, 1)
-    C = (num[1:] - den[1:] * num[0])[None, :]
-    return A, B, C, np.array([[num[0]]])
-
-
-def _zoh_numpy(num: np.ndarray, den: np.ndarray, dt: float):
-    """Exact zero-order-hold discretisation of `num/den` (the controllable canonical
-    form of `ContinuousTransferFunction.discretise`, in NumPy/SciPy: the JAX version
-    recompiled on every call, ~1 s per continuous case)."""
-    A, B, C, D = _companion_numpy(num, den)
-    n = A.shape[0]
-    M = np.zeros((n + 1, n + 1))
-    M[:n, :n], M[:n, n:] = A * dt, B * dt
-    E = scipy.linalg.expm(M)
-    return E[:n, :n], E[:n, n:], C, D
-
-
-def _lfilter_numpy(b: np.ndarray, a: np.ndarray, u: np.ndarray) -> np.ndarray:
-    """`scipy.signal.lfilter(b, a, u)` from rest for `a[0] == 1` (direct form II
-    transposed on Python floats: importing `scipy.signal` costs ~0.6 s, more than
-    the loop for these low orders)."""
-    b, a = [float(x) for x in b], [float(x) for x in a]
-    n = len(a) - 1
-    z = [0.0] * (n + 1)
-    y = np.empty(u.shape[0])
-    for k, uk in enumerate(u.tolist()):
-        yk = b[0] * uk + z[0]
-        for i in range(n):
-            z[i] = z[i + 1] + b[i + 1] * uk - a[i + 1] * yk
-        y[k] = yk
-    return y
-
-
 def _response_numpy(linear, u: np.ndarray, dt: float) -> np.ndarray:
     """Nominal linear response from rest (NumPy: no compilation per record length)."""
     if isinstance(linear, ContinuousTransferFunction):
-        A, B, C, D = _zoh_numpy(np.asarray(linear.num), np.asarray(linear.den), dt)
+        A, B, C, D = zoh_tf(np.asarray(linear.num), np.asarray(linear.den), dt, xp=np)
     else:
         b, a = np.asarray(linear.b), np.asarray(linear.a)
         n = max(a.shape[0], b.shape[0])
         b = np.r_[b, np.zeros(n - b.shape[0])]
         a = np.r_[a, np.zeros(n - a.shape[0])]
-        return _lfilter_numpy(b, a, np.asarray(u, float))  # a[0] == 1
+        return lfilter_numpy(b, a, np.asarray(u, float))  # a[0] == 1
     x = np.zeros(A.shape[0])
     y = np.empty(u.shape[0])
     Bc, Cr, d = B[:, 0], C[0], float(D[0, 0])

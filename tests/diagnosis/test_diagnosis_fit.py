@@ -262,26 +262,6 @@ def test_reported_std_matches_the_monte_carlo_spread():
     assert abs(ratio - 1) < 4 / np.sqrt(2 * (R - 1)), ratio
 
 
-def test_numpy_nominal_response_matches_scipy():
-    import scipy.signal
-
-    from hamjax.diagnosis.layout import _companion_numpy, _lfilter_numpy
-
-    rng = np.random.default_rng(1)
-    u = rng.normal(size=500)
-    b, a = np.array([0.0, 0.06, 0.01, 0.0]), np.array([1.0, -2.02, 1.349, -0.297])
-    np.testing.assert_allclose(
-        _lfilter_numpy(b, a, u), scipy.signal.lfilter(b, a, u), rtol=0, atol=1e-12
-    )
-    for num, den in (([2.0, 1.0], [1.0, 3.0, 2.0]), ([1.0, 2.0, 1.0], [2.0, 3.0, 2.0])):
-        for mine, ref in zip(
-            _companion_numpy(np.array(num), np.array(den)),
-            scipy.signal.tf2ss(num, den),
-            strict=True,
-        ):
-            np.testing.assert_allclose(mine, ref, atol=1e-14)
-
-
 @pytest.mark.slow
 def test_static_flags_give_the_run_time_decision():
     # A call that knows what all its batches need compiles a smaller program:

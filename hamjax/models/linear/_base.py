@@ -87,17 +87,6 @@ class AbstractDiscreteLinearBlock(AbstractLinearBlock):
         """One sample: `(state, u_k) -> (next state, y_k)`."""
 
 
-def outer(
-    coefficients: Float[Array, " n"], u: Float[Array, "*batch"]
-) -> Float[Array, " n *batch"]:
-    """$c_i u$ for every coefficient $c_i$: the state axis first, then the batch
-    axes of `u` (none: the plain product)."""
-    u = jnp.asarray(u)
-    if u.ndim == 0:
-        return coefficients * u
-    return coefficients[(slice(None),) + (None,) * u.ndim] * u[None]
-
-
 class AbstractContinuousLinearBlock(AbstractLinearBlock):
     """A linear block in continuous time, simulated at a sampling period `dt`."""
 

@@ -1,12 +1,12 @@
 """Continuous transfer function $G(s) = \\text{num}(s)/\\text{den}(s)$."""
 
 import jax.numpy as jnp
-import jax.scipy.linalg as jsl
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float
 
 from ..._checks import check_finite, concrete
 from ..._fields import float_field
+from ...simulation.filters import companion, zoh_tf
 from ._base import AbstractContinuousLinearBlock, rational_stable
 from .state_space import DiscreteStateSpace
 
@@ -65,26 +65,12 @@ class ContinuousTransferFunction(AbstractContinuousLinearBlock):
         return jnp.polyval(self.num, s) / jnp.polyval(self.den, s)
 
     def state_space(self) -> tuple[Array, Array, Array, Array]:
-        """Controllable canonical form `(A, B, C, D)` (the `scipy.signal.tf2ss` one)."""
-        n = self.order
-        den = self.den / self.den[0]
-        num = jnp.pad(self.num, (n + 1 - self.num.shape[0], 0)) / self.den[0]
-        d = num[0]
-        if n == 0:
-            z = jnp.zeros((0, 0))
-            return z, jnp.zeros((0, 1)), jnp.zeros((1, 0)), d.reshape(1, 1)
-        top = -den[1:][None, :]
-        A = jnp.concatenate([top, jnp.eye(n - 1, n)], axis=0)
-        B = jnp.eye(n, 1)
-        C = (num[1:] - den[1:] * d)[None, :]
-        return A, B, C, d.reshape(1, 1)
+        """Controllable canonical form `(A, B, C, D)` (the `scipy.signal.tf2ss` one,
+        `hamjax.simulation.filters.companion`)."""
+        return companion(self.num, self.den)
 
     def discretise(self, dt: float) -> DiscreteStateSpace:
         """Exact zero-order-hold discretisation at sampling period `dt`."""
         if not dt > 0:
             raise ValueError(f"sampling period dt must be > 0; got {dt}")
-        A, B, C, D = self.state_space()
-        n = A.shape[0]
-        M = jnp.zeros((n + 1, n + 1)).at[:n, :n].set(A * dt).at[:n, n:].set(B * dt)
-        E = jsl.expm(M)
-        return DiscreteStateSpace(E[:n, :n], E[:n, n:], C, D, dt=dt)
+        return DiscreteStateSpace(*zoh_tf(self.num, self.den, dt), dt=dt)

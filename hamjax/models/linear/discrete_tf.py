@@ -1,14 +1,14 @@
 """Discrete transfer function $y = B(q^{-1}) / A(q^{-1})\\, u$ (seed 001 form)."""
 
 import equinox as eqx
-import jax.lax as lax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float
 
 from ..._checks import check_finite, concrete
 from ..._types import Signal
-from ._base import AbstractDiscreteLinearBlock, outer, rational_stable
+from ...simulation.filters import df2t_step, filter_scan
+from ._base import AbstractDiscreteLinearBlock, rational_stable
 
 
 class DiscreteTransferFunction(AbstractDiscreteLinearBlock):
@@ -95,22 +95,11 @@ class DiscreteTransferFunction(AbstractDiscreteLinearBlock):
     def step(self, state, u):
         """Direct form II transposed, one sample."""
         b, a = self._padded()
-        return _df2t_step(b, a, state, u)
+        return df2t_step(b, a, state, u)
 
     def response(self, u: Signal) -> Signal:
         """Output from rest for the input samples `u` (same as `lfilter(b, a, u)`)."""
         b, a = self._padded()
         if self.order == 0:
             return b[0] * u
-        _, y = lax.scan(lambda z, uk: _df2t_step(b, a, z, uk), self.zero_state(u[0]), u)
-        return y
-
-
-def _df2t_step(b, a, z, u):
-    r"""`DiscreteTransferFunction.step` from its padded `(b, a)`: $y_k = b_0 u_k +
-    z_0$, then $z \leftarrow$ (z shifted up) $+ b_{1:} u_k - a_{1:} y_k$."""
-    if b.shape[0] == 1:  # order 0: a static gain, the state stays at zero
-        return z, b[0] * u
-    y = b[0] * u + z[0]
-    shifted = jnp.concatenate([z[1:], jnp.zeros_like(z[:1])], axis=0)
-    return shifted + outer(b[1:], u) - outer(a[1:], y), y
+        return filter_scan(b, a, u, self.zero_state(u[0]))[1]

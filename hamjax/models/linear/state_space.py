@@ -8,7 +8,8 @@ from jaxtyping import Array, ArrayLike, Bool, Float
 
 from ..._checks import concrete
 from ..._types import Signal
-from ._base import AbstractDiscreteLinearBlock, outer
+from ...simulation.filters import outer
+from ._base import AbstractDiscreteLinearBlock
 
 
 class DiscreteStateSpace(AbstractDiscreteLinearBlock):

@@ -152,10 +152,11 @@ def report_markdown(d, name: str = "case", nominal: str | None = None) -> str:
     fb = d.where.get("feedback", {})
     if fb.get("closed_loop"):
         lines.append(
-            f"- the record looks closed-loop: the residual predicts the input "
-            f"{fb['lag']} samples later (z = {fb['z']:.1f} > {fb['threshold']:.1f}, "
-            "Ljung's test for feedback at 1 %): v is a controller's output, so the "
-            "noise reaches it and simulation-error fits can be biased"
+            f"- the record looks closed-loop: the output predicts the input beyond "
+            f"the input's own past (Granger test for feedback at 1 %: F = "
+            f"{fb['z']:.1f} > {fb['threshold']:.1f}, strongest at output lag "
+            f"{fb['lag']}): v is a controller's output, so the noise reaches it and "
+            "simulation-error fits can be biased"
         )
     lines += [
         f"- gap before (nominal model): {d.gap_before:.4g} (units of y)",

@@ -260,6 +260,8 @@ def feedback_test(
     start = max(order, max_lag)
     if n - start < 4 * (order + m) or n - start < 2 * n_blocks or np.ptp(v) == 0:
         return {"applicable": False, "why": "record too short or input constant"}
+    if not (np.all(np.isfinite(s)) and np.all(np.isfinite(v))):
+        return {"applicable": False, "why": "the output or the input is not finite"}
     k = np.arange(start, n)
     X = np.column_stack(
         [s[k - j] for j in range(m)] + [v[k - i] for i in range(1, order + 1)]

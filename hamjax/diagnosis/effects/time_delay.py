@@ -104,6 +104,10 @@ def delay_shortlist(
     pass for a shift."""
     y, w = np.asarray(y, float), np.asarray(w, float)
     n = w.shape[0]
+    if not (np.all(np.isfinite(w)) and np.all(np.isfinite(y))):
+        # an overflowing nominal: nothing to screen; the fits report it as not
+        # finite (`DiagnosisNotFinite`), a least-squares solve here would raise
+        return tuple(range(1, min(keep, max_delay) + 1))
     series = [w] + ([_lag(w, t_dom)] if np.isfinite(t_dom) and t_dom >= 1 else [])
     # each series with its first value held before t = 0
     held = [np.concatenate([np.full(max_delay + 1, x[0]), x]) for x in series]

@@ -1,7 +1,7 @@
-"""Which matrix exponential should the zero-order hold use? (`simulation.filters.expm`)
+"""Which matrix exponential should the zero-order hold use? (`hamjax._filters.expm`)
 
 Times, in one process on this machine, the fixed Taylor series with squaring
-(`hamjax.simulation.filters.expm`) against `jax.scipy.linalg.expm` (Padé with a
+(`hamjax._filters.expm`) against `jax.scipy.linalg.expm` (Padé with a
 branch on the norm) in the two places the zero-order hold runs:
 
 1. the diagnosis: `jit(vmap(jvp(expm)))` over a batch of 5x5 matrices (the
@@ -23,7 +23,7 @@ import jax.scipy.linalg as jsl
 import numpy as np
 
 import hamjax
-from hamjax.simulation.filters import expm_taylor as taylor_expm
+from hamjax._filters import expm_taylor as taylor_expm
 
 
 def _median_time(f, repeats: int) -> float:

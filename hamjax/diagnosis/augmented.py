@@ -38,10 +38,10 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
+from .._filters import df2t_step, expm_taylor, filter_scan, zoh_tf
 from .._linalg import charpoly_adjugate
 from ..models.nonlinearities.backlash import Backlash, BacklashState
 from ..models.nonlinearities.piecewise_linear import piecewise_linear_map
-from ..simulation.filters import df2t_step, expm_taylor, filter_scan, zoh_tf
 from .effects._base import UNIT_MAX, StartContext, unit_raw
 from .effects.backlash import BacklashEffect, slide_init, slide_step, stick_slip_step
 from .effects.dead_zone import DeadZoneEffect, dead_zone

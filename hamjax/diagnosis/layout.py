@@ -10,6 +10,7 @@ import numpy as np
 from jax import lax
 from jaxtyping import Array, Float
 
+from .._filters import lfilter_numpy, zoh_tf
 from ..models import (
     Backlash,
     ContinuousTransferFunction,
@@ -21,7 +22,6 @@ from ..models import (
 )
 from ..models.hammerstein import fold_output_scale
 from ..models.nonlinearities.piecewise_linear import piecewise_linear_map
-from ..simulation.filters import lfilter_numpy, zoh_tf
 from .augmented import (
     EFFECT_NEUTRAL,
     EFFECT_SLOTS,

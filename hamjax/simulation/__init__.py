@@ -1,15 +1,16 @@
 """Simulation: the one linear filter (`filters`), sampled and batched time-major
 simulation of Hammerstein plants, and diffrax in continuous time.
 
-`filters` imports nothing else of hamjax and is loaded first: the linear blocks of
-`hamjax.models` step and discretise with it, while the simulators below import
+`filters` is `hamjax._filters`, a private base module that imports nothing else
+of hamjax (so `models` may use it without importing a layer above it): the
+linear blocks of `hamjax.models` step and discretise with it, while the simulators below import
 `hamjax.models`; they are therefore loaded on first use (PEP 562), which keeps
 the two from importing each other half-way.
 """
 
 import importlib as _importlib
 
-from . import filters as filters
+from .. import _filters as filters
 
 
 _LAZY = {

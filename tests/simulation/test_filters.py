@@ -1,4 +1,4 @@
-"""The one linear filter (`hamjax.simulation.filters`): companion form, matrix
+"""The one linear filter (`hamjax._filters`): companion form, matrix
 exponential, zero-order hold and direct form II transposed against scipy, and each
 host (NumPy) twin against its JAX path."""
 
@@ -9,8 +9,7 @@ import pytest
 import scipy.linalg
 from scipy import signal
 
-from hamjax._linalg import charpoly_adjugate
-from hamjax.simulation.filters import (
+from hamjax._filters import (
     companion,
     df2t_step,
     expm_taylor,
@@ -19,6 +18,7 @@ from hamjax.simulation.filters import (
     zoh,
     zoh_tf,
 )
+from hamjax._linalg import charpoly_adjugate
 
 
 # Rounding: a few hundred float64 operations per entry, each within 2^-53; 1e-12

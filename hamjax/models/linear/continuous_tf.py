@@ -6,7 +6,7 @@ from jaxtyping import Array, ArrayLike, Bool, Float
 
 from ..._checks import check_finite, concrete
 from ..._fields import float_field
-from ...simulation.filters import companion, zoh_tf
+from ..._filters import companion, zoh_tf
 from ._base import AbstractContinuousLinearBlock, rational_stable
 from .state_space import DiscreteStateSpace
 
@@ -66,7 +66,7 @@ class ContinuousTransferFunction(AbstractContinuousLinearBlock):
 
     def state_space(self) -> tuple[Array, Array, Array, Array]:
         """Controllable canonical form `(A, B, C, D)` (the `scipy.signal.tf2ss` one,
-        `hamjax.simulation.filters.companion`)."""
+        `hamjax._filters.companion`)."""
         return companion(self.num, self.den)
 
     def discretise(self, dt: float) -> DiscreteStateSpace:

@@ -6,8 +6,8 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float
 
 from ..._checks import check_finite, concrete
+from ..._filters import df2t_step, filter_scan
 from ..._types import Signal
-from ...simulation.filters import df2t_step, filter_scan
 from ._base import AbstractDiscreteLinearBlock, rational_stable
 
 

@@ -7,8 +7,8 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float
 
 from ..._checks import concrete
+from ..._filters import outer
 from ..._types import Signal
-from ...simulation.filters import outer
 from ._base import AbstractDiscreteLinearBlock
 
 

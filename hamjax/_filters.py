@@ -16,7 +16,6 @@ import jax.lax as lax
 import jax.numpy as jnp
 import jax.scipy.linalg as jsl
 import numpy as np
-import scipy.linalg
 from jaxtyping import Array, Float
 
 
@@ -108,6 +107,8 @@ def zoh(
     anew for each (~1 s per continuous case, measured when the twin was written)."""
     n = A.shape[0]
     if xp is np:
+        import scipy.linalg  # not at import: `hamjax.models` imports this module
+
         M = np.zeros((n + 1, n + 1))
         M[:n, :n], M[:n, n:] = A * dt, B * dt
         E = scipy.linalg.expm(M)

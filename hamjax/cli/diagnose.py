@@ -82,12 +82,15 @@ def _sizes(folder: Path) -> tuple | None:
         return None
 
 
-def padding(cases: list[Path]):
+def padding(cases: list[Path], read: dict | None = None):
     """`run_padding` of the run: the same on every process, whatever their
-    number (from the whole case list, never from a fit)."""
+    number (from the whole case list, never from a fit). `read`: `_sizes` of the
+    cases already read, by folder (so that they are not read twice)."""
     from ..diagnosis.diagnose import run_padding
 
-    sizes = [_sizes(folder) for folder in sorted(set(cases), key=str)]
+    read = read or {}
+    folders = sorted(set(cases), key=str)
+    sizes = [read[f] if f in read else _sizes(f) for f in folders]
     return run_padding(s for s in sizes if s is not None)
 
 
@@ -107,8 +110,8 @@ def _plan(args: argparse.Namespace, *, notes: bool) -> tuple[list[Path], list]:
     refuse_unless_forced(args.out, earlier, args.force, "diagnosis results")
     if len(args.cases) == 1:
         return [args.out], earlier
-    names, notes = unique_names(args.cases, args.out)
-    for note in notes if notes else ():
+    names, renamed = unique_names(args.cases, args.out)
+    for note in renamed if notes else ():
         print(f"hamjax: note: {note}", file=sys.stderr)
     return [args.out / n for n in names], earlier
 
@@ -290,8 +293,10 @@ def _diagnose(args, cases: list, outs, quiet, verbose) -> int:
     from ..diagnosis.report import write_diagnosis
     from ..io import model_to_dict, write_json
 
-    item, where = {}, {}
+    item, where, read = {}, {}, {}
     for i, case, out in cases:
+        n = max(case.estimation["v"].shape[0], case.validation["v"].shape[0])
+        read[args.cases[i]] = (case.model, n)  # as `_sizes` reads it
         plant = case.model
         if plant is None:
             plant = fit_nominal(case.dt, case.estimation)
@@ -325,7 +330,7 @@ def _diagnose(args, cases: list, outs, quiet, verbose) -> int:
             [item[i] for i in members],
             on_result=write,
             rule=args.rule,
-            padding=padding(args.cases),
+            padding=padding(args.cases, read),
             **prior,
         )
     except DiagnosisNotFinite as err:

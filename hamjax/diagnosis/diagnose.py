@@ -105,6 +105,7 @@ class Padding:
     lengths: tuple[tuple[int, int], ...]  # (length group, padded length), sorted
 
 
+@ft.cache
 def _fitted_n_params() -> int:
     """The widest nominal `nominal_fit.fit_nominal` fits: a piecewise-linear map
     and the highest order (a stable block of max `ORDERS`, or an integrating one,

@@ -5,6 +5,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, Int
 
+from ..._filters import lfilter_numpy
 from ._base import AbstractEffect, StartContext
 
 
@@ -78,13 +79,9 @@ def delay_range(t_dom: float, n: int) -> int:
 
 def _lag(w: np.ndarray, t: float) -> np.ndarray:
     """$w$ through the unit-gain lag $(1 - c) / (1 - c q^{-1})$, $c = e^{-1/t}$,
-    started at rest at $w_0$ (NumPy)."""
+    started at rest at $w_0$ (`lfilter_numpy` of $w - w_0$, plus $w_0$)."""
     c = float(np.exp(-1.0 / t))
-    out, x = np.empty(w.shape[0]), float(w[0])
-    for k, wk in enumerate(w.tolist()):
-        x = c * x + (1 - c) * wk
-        out[k] = x
-    return out
+    return w[0] + lfilter_numpy([1.0 - c, 0.0], [1.0, -c], w - w[0])
 
 
 def delay_shortlist(

@@ -10,9 +10,12 @@ this one) the script runs, each in its own fresh process with that tree first on
 2. `hamjax diagnose` on blind sets made by the *new* tree (`hamjax blind make`,
    the cases are files, so both trees read the same bytes), and compares the
    effect named per case and `gap_after` (relative `--gap-rtol`, default 1e-6);
-3. the wall time of each diagnosis call and of `hamjax study
-   simulation-throughput`, old and new alternating, `--repeats` times each, and
-   reports the median ratio new/old.
+3. the wall time of each diagnosis call, of one case diagnosed cold (a fresh
+   process, the compile cache off), of `hamjax study simulation-throughput` and
+   of each hamjax method of `benchmarks/benchmark_throughput.py` (each tree's own
+   copy, a small size), old and new alternating, `--repeats` times each, and
+   reports the median ratio new/old (for the benchmark: of throughputs, so >1 is
+   faster).
 
     python benchmarks/compare_revisions.py --old /path/to/old/tree --new . \\
         --out results/compare --cases 240
@@ -205,6 +208,60 @@ def compare_throughput(old: Path, new: Path, out: Path, repeats: int) -> dict:
     return {"wall_s": walls, "ratio_new_over_old": med["new"] / med["old"]}
 
 
+def compare_cold(old: Path, new: Path, out: Path, repeats: int) -> dict:
+    """One case, a fresh process, no compile cache: what a first call costs."""
+    blind = out / "blind" / "realistic_seed0"
+    if not (blind / "truth.json").is_file():
+        argv = ["blind", "make", "--cases", "1", "--seed", "0", "--realism"]
+        _hamjax(new, [*argv, "realistic", "--out", str(blind)], cwd=out)
+    case = str(sorted((blind / "cases").iterdir())[0])
+    walls = {"old": [], "new": []}
+    for r in range(repeats):
+        for tag, tree in (("old", old), ("new", new)):
+            folder = out / "cold" / tag / f"run{r}"
+            argv = ["diagnose", case, "--out", str(folder), "--quiet", "--force"]
+            walls[tag].append(_hamjax(tree, argv, cwd=out))
+    med = {t: statistics.median(w) for t, w in walls.items()}
+    print(f"diagnose one case cold wall new/old {med['new'] / med['old']:.3f}")
+    return {
+        "case": case,
+        "wall_s": walls,
+        "ratio_new_over_old": med["new"] / med["old"],
+    }
+
+
+def compare_benchmark(old: Path, new: Path, out: Path, repeats: int) -> dict:
+    """Each tree's own throughput benchmark at a small size; throughput ratios."""
+    tables = {"old": [], "new": []}
+    for r in range(repeats):
+        for tag, tree in (("old", old), ("new", new)):
+            folder = out / "benchmark" / tag / f"run{r}"
+            env = dict(os.environ, PYTHONPATH=str(tree), HAMJAX_CACHE_DIR="off")
+            argv = [
+                sys.executable,
+                str(tree / "benchmarks" / "benchmark_throughput.py"),
+            ]
+            argv += ["--realisations", "1024", "--samples", "4000", "--no-ablation"]
+            argv += ["--memory-realisations", "0", "--out", str(folder)]
+            subprocess.run(argv, cwd=out, env=env, check=True, capture_output=True)
+            table = json.loads((folder / "benchmark.json").read_text())["table"]
+            tables[tag].append(table)
+    ratios = {}
+    for workload, methods in tables["new"][0].items():
+        for method in methods:
+            if not method.startswith("hamjax"):
+                continue  # the peers are the same code in both trees
+            rates = {
+                t: statistics.median(tab[workload][method] for tab in tables[t])
+                for t in tables
+            }
+            if rates["old"] and rates["new"]:
+                ratios[f"{workload}/{method}"] = rates["new"] / rates["old"]
+    for key, ratio in ratios.items():
+        print(f"benchmark {key} throughput new/old {ratio:.3f}")
+    return {"tables": tables, "throughput_ratio_new_over_old": ratios}
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--old", type=Path, required=True, help="old source tree")
@@ -217,7 +274,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--skip",
         default="",
-        help="comma-separated parts to skip: studies,diagnose,throughput",
+        help="comma-separated parts to skip: studies,diagnose,cold,throughput,benchmark",
     )
     args = parser.parse_args(argv)
     for tree in (args.old, args.new):
@@ -234,8 +291,12 @@ def main(argv: list[str] | None = None) -> int:
         report["diagnose"] = compare_diagnoses(
             old, new, out, args.cases, args.gap_rtol, args.repeats
         )
+    if "cold" not in skip:
+        report["cold"] = compare_cold(old, new, out, args.repeats)
     if "throughput" not in skip:
         report["throughput"] = compare_throughput(old, new, out, args.repeats)
+    if "benchmark" not in skip:
+        report["benchmark"] = compare_benchmark(old, new, out, args.repeats)
     (out / "compare.json").write_text(json.dumps(report, indent=2))
     ok = all(s["equal"] for s in report.get("studies", {}).values()) and all(
         d["same_effect"] == d["cases"] and d["gap_within_tolerance"]

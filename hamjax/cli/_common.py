@@ -50,21 +50,20 @@ def add_cluster_arguments(p: argparse.ArgumentParser, *, how: str) -> None:
         "several processes (docs/cluster.md)",
         f"as jax.distributed.initialize: {how}",
     )
-    cluster.add_argument(
-        "--coordinator", metavar="HOST:PORT", help="address of process 0"
+    detected = (
+        "start jax.distributed with the cluster detected by JAX (SLURM, Open MPI, "
+        "...) when --coordinator is not given"
     )
-    cluster.add_argument(
-        "--num-processes", type=positive_int, metavar="N", help="number of processes"
-    )
-    cluster.add_argument(
-        "--process-id", type=int, metavar="I", help="this process, 0..N-1"
-    )
-    cluster.add_argument(
-        "--distributed",
-        action="store_true",
-        help="start jax.distributed with the cluster detected by JAX (SLURM, "
-        "Open MPI, ...) when --coordinator is not given",
-    )
+    for flag, options in (
+        ("--coordinator", {"metavar": "HOST:PORT", "help": "address of process 0"}),
+        (
+            "--num-processes",
+            {"type": positive_int, "metavar": "N", "help": "number of processes"},
+        ),
+        ("--process-id", {"type": int, "metavar": "I", "help": "this process, 0..N-1"}),
+        ("--distributed", {"action": "store_true", "help": detected}),
+    ):
+        cluster.add_argument(flag, **options)
 
 
 def start_cluster(args: argparse.Namespace) -> None:

@@ -34,7 +34,10 @@ Decisions, in order:
   the re-fit partly absorbs) and validation confirms it ($z > 2$); otherwise
   `parameter_mismatch` when that is significant;
   the named effect becomes `unexplained` when it closes less than half of the gap
-  above the noise floor (shrink $< 0.5$);
+  above the noise floor (shrink $< 0.5$), unless the like-for-like veto below
+  finds it significant with the noise model on top: then what it leaves is that
+  noise (a disturbance no simulation follows, such as a control loop's load), and
+  it keeps its name;
 - otherwise a *noise-model* effect (`drift`, `coloured_noise`) when its one-step-ahead
   predictor of the nominal residual is significant against the white-noise
   predictor (the same two conditions);
@@ -390,11 +393,12 @@ def attribute(prep: Prepared, fit: dict) -> Attribution:
         if n_sig:
             effect, chosen = noise_c.effect, noise_c
     gap_before, gap_after, floor, shrink = gaps(r_before, chosen)
-    if (
+    partial = (
         chosen is not None
         and chosen.measure == "simulation"
         and shrink < SHRINK_EXPLAINED
-    ):
+    )
+    if partial:
         effect = "unexplained"
     # A slow trend or coloured noise that a re-fit partly soaks up on estimation
     # data leaves a deterministic "explanation" that closes the gap only partly,
@@ -412,6 +416,11 @@ def attribute(prep: Prepared, fit: dict) -> Attribution:
                 effect, chosen = noise_c.effect, noise_c
                 gap_after = floor = chosen.gap_after
                 shrink = 1.0
+            elif partial:
+                # D with M on top beats the nominal with M: what D leaves on the
+                # other experiment is M's noise, which no simulation follows (a
+                # control loop's load), not an unexplained mismatch.
+                effect = chosen.effect
     return attribution(
         effect,
         chosen,

@@ -174,6 +174,7 @@ def _result(prep, att: Attribution, val: dict) -> GapDiagnosis:
         prep.u_val,
         att.noise_floor,
         prep.ctx.dt,
+        y=val["y"],
     )
     # each class is tried once: its validation mean-square error
     mse = {"none": att.gap_before**2} | {

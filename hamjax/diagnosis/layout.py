@@ -53,7 +53,6 @@ from .effects import (
 from .effects._base import FLIP_SIGN, output_half_range, scale_span
 from .effects.backlash import slide_init, slide_step, stick_slip_step
 from .effects.time_delay import delay_range, delay_shortlist, dominant_time_constant
-from .locate import period_of
 from .residuals import feedback_test, noise_std_differences
 
 
@@ -200,8 +199,6 @@ def _looks_closed_loop(y: np.ndarray, v: np.ndarray) -> bool:
     where it does not apply: a periodic input, a short record). The output, not
     the nominal's residual: the test's level must not depend on the nominal
     being right, and the nominal's numerator may have a direct feedthrough."""
-    if period_of(v) is not None:
-        return False
     return bool(feedback_test(y, v).get("closed_loop", False))
 
 

@@ -13,6 +13,7 @@ from .residuals import (
     cross_correlation,
     feedback_test,
     ljung_box,
+    period_of,
 )
 
 
@@ -59,18 +60,6 @@ def frequency_bands(r, v, floor, dt) -> list[dict]:
             }
         )
     return out
-
-
-def period_of(v: np.ndarray) -> int | None:
-    """Smallest period (samples) of an exactly periodic input with >= 2 periods."""
-    n = v.shape[0]
-    tol = 1e-9 * (np.ptp(v) or 1.0)
-    for p in np.flatnonzero(np.abs(v - v[0]) <= tol):
-        if p < 2 or p > n // 2:
-            continue
-        if np.all(np.abs(v[p:] - v[:-p]) <= tol):
-            return int(p)
-    return None
 
 
 def periodic_split(r: np.ndarray, period: int) -> dict:
@@ -208,16 +197,19 @@ def _axes(t, v, r, u, floor, dt) -> dict:
     return out
 
 
-def locate(t, v, r_before, r_after, u, floor, dt) -> dict:
+def locate(t, v, r_before, r_after, u, floor, dt, *, y=None) -> dict:
     """The `where` block of diagnosis.json: every axis for the residual of the
     nominal model (`before`) and of the augmented model (`after`), and whether
-    the record looks closed-loop (`residuals.feedback_test` on the augmented
-    model's residual)."""
+    the record looks closed-loop: `residuals.feedback_test` on the measured
+    output `y`, as the gate of the candidate layout tests it
+    (`layout._looks_closed_loop`): a model's residual is not a function of past
+    inputs alone when the model has a direct feedthrough, and its level would
+    depend on the model being right. Without `y` the test is not run."""
     t, v, u = (np.asarray(x, float) for x in (t, v, u))
-    if period_of(v) is None:
-        feedback = feedback_test(np.asarray(r_after, float), v)
+    if y is None:
+        feedback = {"applicable": False, "why": "the measured output was not given"}
     else:
-        feedback = {"applicable": False, "why": "periodic input"}
+        feedback = feedback_test(np.asarray(y, float), v)
     return {
         "noise_floor": float(floor),
         "feedback": feedback,

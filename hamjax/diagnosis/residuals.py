@@ -210,6 +210,18 @@ def longest_hold(v: np.ndarray) -> int:
     return int(np.max(np.diff(edges)))
 
 
+def period_of(v: np.ndarray) -> int | None:
+    """Smallest period (samples) of an exactly periodic input with >= 2 periods."""
+    n = v.shape[0]
+    tol = 1e-9 * (np.ptp(v) or 1.0)
+    for p in np.flatnonzero(np.abs(v - v[0]) <= tol):
+        if p < 2 or p > n // 2:
+            continue
+        if np.all(np.abs(v[p:] - v[:-p]) <= tol):
+            return int(p)
+    return None
+
+
 def feedback_test(
     s: np.ndarray,
     v: np.ndarray,
@@ -247,8 +259,8 @@ def feedback_test(
     plant's output still shows that step when the input's last $p$ samples do
     not. The order is therefore at least `FEEDBACK_HOLDS` times the longest
     hold (`longest_hold`; at most a twentieth of the record). Not
-    applicable to an exactly periodic input (its future is its past; the caller
-    checks), a constant input, or a record too short for the regression
+    applicable to an exactly periodic input (`period_of`: its future is its
+    past, so the output's past adds nothing to an exact predictor), a constant input, or a record too short for the regression
     (fewer than $4(p + m)$ or $2B$ regression rows)."""
     from scipy import stats
 
@@ -260,6 +272,8 @@ def feedback_test(
     start = max(order, max_lag)
     if n - start < 4 * (order + m) or n - start < 2 * n_blocks or np.ptp(v) == 0:
         return {"applicable": False, "why": "record too short or input constant"}
+    if period_of(v) is not None:
+        return {"applicable": False, "why": "periodic input"}
     if not (np.all(np.isfinite(s)) and np.all(np.isfinite(v))):
         return {"applicable": False, "why": "the output or the input is not finite"}
     k = np.arange(start, n)

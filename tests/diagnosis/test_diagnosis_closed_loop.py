@@ -133,3 +133,30 @@ def test_a_sticky_valve_under_a_drifting_load_keeps_its_name(tmp_path, capsys):
     veto = r["tests"]["deterministic_over_noise"]
     assert veto["significant"] and r["shrink"] < SHRINK_EXPLAINED, r["tests"]
     assert r["effect"] == "backlash", r["effect"]
+
+
+def test_a_periodic_input_is_not_tested():
+    # its future is its past: the test refuses it itself (no caller's guard)
+    y, v = _pi_loop(0)
+    period = 250
+    v_periodic = np.tile(v[:period], v.shape[0] // period)
+    out = feedback_test(y[: v_periodic.shape[0]], v_periodic)
+    assert not out["applicable"] and out["why"] == "periodic input"
+    # one sample off the period makes it an ordinary record again
+    v_periodic[-1] += 1.0
+    assert feedback_test(y[: v_periodic.shape[0]], v_periodic)["applicable"]
+
+
+def test_locate_tests_the_measured_output_as_the_layout_gate_does():
+    from hamjax.diagnosis.layout import _looks_closed_loop
+    from hamjax.diagnosis.locate import locate
+
+    y, v = _pi_loop(3)
+    t = np.arange(v.shape[0]) * 0.1
+    # a residual that is white noise, independent of the loop: a test on it
+    # would see no feedback; the test on y must (p < 1e-6 on every PI draw above)
+    r = np.random.default_rng([13, 0]).standard_normal(v.shape[0])
+    where = locate(t, v, r, r, v, 1.0, 0.1, y=y)
+    assert where["feedback"] == feedback_test(y, v)
+    assert where["feedback"]["closed_loop"] and _looks_closed_loop(y, v)
+    assert not feedback_test(r, v)["closed_loop"]

@@ -129,6 +129,26 @@ def run_padding(cases: Iterable[tuple[Hammerstein | None, int]]) -> Padding:
     return Padding(n_params, tuple(sorted(lengths.items())))
 
 
+# Cases per `diagnose_many` call of a run cut into blocks (`run_blocks`): each
+# block's cases are batched together (`schedule.run_queue`), so a block of at
+# least `CASES_PER_BATCH` cases keeps the batches full. Measured on 120 A0 cases
+# (2 cores, 1 process): blocks of 32 cost COST_TBD against one call of all.
+CASES_PER_CALL = 32
+
+
+def run_blocks(n_cases: int) -> list[range]:
+    """The blocks of a run of `n_cases` cases, positions in the run's order (for
+    `hamjax diagnose`, the case folders sorted by path): `CASES_PER_CALL`
+    consecutive cases each, the last one shorter.
+
+    Each block is one `diagnose_many` call with the run's padding (`run_padding`
+    of all its cases). A case's numbers depend on its padding and on the cases
+    batched with it, both fixed by the block, so they depend only on the run's
+    case list, never on which process (or how many) diagnoses which block."""
+    size = CASES_PER_CALL
+    return [range(k, min(k + size, n_cases)) for k in range(0, n_cases, size)]
+
+
 def _evidence_samples(att: Attribution, mse: dict) -> float:
     """`probabilities.effective_samples` of the named effect against its best
     rival (the nominal model's residual for `none`)."""

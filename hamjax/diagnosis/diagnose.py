@@ -97,9 +97,10 @@ def _group(n: int) -> int:
 class Padding:
     """The padding of a run: the parameter-vector width and, per length group
     (`_group`), the padded record length. A case's numbers depend on its padding
-    (XLA's tiling, hence rounding, follows the array shapes), not on the other
-    cases fitted with it, so cases given one run's padding have the same numbers
-    whichever call diagnoses them."""
+    (XLA's tiling, hence rounding, follows the array shapes) and, in the last
+    digits, on the cases batched with it: a run cut into blocks (`run_blocks`),
+    each one call with the run's padding, has the same numbers whichever process
+    diagnoses which block."""
 
     n_params: int
     lengths: tuple[tuple[int, int], ...]  # (length group, padded length), sorted
@@ -248,8 +249,8 @@ def diagnose_many(
     "likelihood", `decide.decide`). `on_result(i, diagnosis)` is
     called as soon as case `i` is done, so a caller can write each result while the
     others are still being fitted. `padding`: that of a whole run (`run_padding`
-    of all its cases), so that a case split off into another call keeps its
-    numbers; None: `run_padding(items)`.
+    of all its cases), for a call of one block of it (`run_blocks`); None:
+    `run_padding(items)`.
 
     **Raises:** `DiagnosisNotFinite` (its `index` the case) if a case's gaps, noise
     floor or simulated outputs are NaN or inf.

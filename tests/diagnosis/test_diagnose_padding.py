@@ -1,6 +1,7 @@
-"""`diagnose_many(padding=)`: a case diagnosed in a call of its own, padded as a
-whole run, has exactly the numbers of that whole run (what lets `hamjax
-diagnose` split a run over processes)."""
+"""`diagnose_many(padding=)`: two tiny cases, each diagnosed in a call of its own
+padded as the whole run, have exactly the numbers of that whole run (with more
+batch-mates the last digits may differ: `hamjax diagnose` splits a run into the
+fixed blocks of `run_blocks`, tested here too)."""
 
 import jax.random as jr
 import numpy as np

@@ -132,8 +132,11 @@ def run_padding(cases: Iterable[tuple[Hammerstein | None, int]]) -> Padding:
 
 # Cases per `diagnose_many` call of a run cut into blocks (`run_blocks`): each
 # block's cases are batched together (`schedule.run_queue`), so a block of at
-# least `CASES_PER_BATCH` cases keeps the batches full. Measured on 120 A0 cases
-# (2 cores, 1 process): blocks of 32 cost COST_TBD against one call of all.
+# least `CASES_PER_BATCH` cases keeps the batches full. Its cost, measured on 120
+# A0 cases (1 process, 2 cores under a load of 12-17, old and new alternating
+# twice): blocks of 32 took 333 and 319 s against 282 and 259 s for one call of
+# all 120 (+20 %, 2.7 against 2.25 s per case), probably the tail of part-filled
+# batches each call ends with (`schedule.run_queue`; not profiled).
 CASES_PER_CALL = 32
 
 

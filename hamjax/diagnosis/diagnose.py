@@ -136,7 +136,8 @@ def run_padding(cases: Iterable[tuple[Hammerstein | None, int]]) -> Padding:
 # A0 cases (1 process, 2 cores under a load of 12-17, old and new alternating
 # twice): blocks of 32 took 333 and 319 s against 282 and 259 s for one call of
 # all 120 (+20 %, 2.7 against 2.25 s per case), probably the tail of part-filled
-# batches each call ends with (`schedule.run_queue`; not profiled).
+# batches each call ends with (`schedule.run_queue`; not profiled). Blocks of 64,
+# once: 226 s against 224 s (load 8-10).
 CASES_PER_CALL = 32
 
 

@@ -45,36 +45,39 @@ def register(sub) -> None:
     )
     add_cluster_arguments(
         p,
-        how="the cases are split over the processes (case k of the cases sorted "
-        "by path to process k mod N), all padded alike so that a case's numbers do "
-        "not depend on N; each writes the cases it owns into OUT, process 0 prints "
-        "the summary",
+        how="the cases are split over the processes (the cases sorted by path are "
+        "cut into blocks of hamjax.diagnosis.diagnose.CASES_PER_CALL, block b to "
+        "process b mod N; every block one call padded as the whole run), so that a "
+        "case's numbers depend only on the case list, not on N; each writes the "
+        "cases it owns into OUT, process 0 prints the summary",
     )
     p.set_defaults(func=run)
 
 
-def share(cases: list[Path], *, num_processes: int, process_id: int) -> list[int]:
-    """Indices of the `cases` that process `process_id` of `num_processes`
-    diagnoses: sorted by path (then by position, for a path given twice), case
-    `k` of that order to process `k mod num_processes`."""
+def share(cases: list[Path], *, num_processes: int, process_id: int) -> list[list[int]]:
+    """The blocks of the `cases` (indices) that process `process_id` of
+    `num_processes` diagnoses, one `diagnose_many` call each: the cases sorted by
+    path (then by position, for a path given twice) and cut into
+    `diagnosis.diagnose.run_blocks`; block `b` to process `b mod num_processes`.
+    The blocks follow from the case list alone, so a case's numbers do not depend
+    on the number of processes."""
+    from ..diagnosis.diagnose import run_blocks
+
     order = sorted(range(len(cases)), key=lambda i: (str(cases[i]), i))
-    return order[process_id::num_processes]
+    blocks = [[order[k] for k in b] for b in run_blocks(len(order))]
+    return blocks[process_id::num_processes]
 
 
 def _sizes(folder: Path) -> tuple | None:
     """`(nominal or None, longer record's length)` of a case, read cheaply (the
-    records' data lines and model.json, no fit), for `run_padding`; None where
+    records' row counts and model.json, no fit), for `run_padding`; None where
     they do not read (the case's owner reports it and skips it)."""
     from .._errors import UserInputError
-    from ..io import load_model
-    from ..io.csv import _content_lines
-    from ..io.files import read_text
+    from ..io import count_rows, load_model
 
     try:
-        # the data rows `read_csv` parses: the content lines after the header
         n = max(
-            len(_content_lines(read_text(folder / f"{name}.csv"))[0]) - 1
-            for name in ("estimation", "validation")
+            count_rows(folder / f"{name}.csv") for name in ("estimation", "validation")
         )
         model = folder / "model.json"
         return (load_model(model)[0] if model.exists() else None), n
@@ -249,10 +252,10 @@ def run(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     me, n_proc = jax.process_index(), jax.process_count()
     outs, earlier = _start(args, me)
-    mine = share(args.cases, num_processes=n_proc, process_id=me)
+    blocks = share(args.cases, num_processes=n_proc, process_id=me)
     error, done, failed = None, 0, 0
     try:
-        cases, failed = _read_cases(args, outs, mine)
+        cases, failed = _read_cases(args, outs, [i for b in blocks for i in b])
     except UserInputError as err:  # one case, unreadable: every process stops
         error, cases = err, []
     any_read = allgather_ints([len(cases), error is not None])
@@ -262,7 +265,7 @@ def run(args: argparse.Namespace) -> int:
         raise UserInputError("process 0 could not read the case (see its error)")
     _clear(args, earlier, bool(any_read[:, 0].any()), me, n_proc, verbose)
     try:
-        done = _diagnose(args, cases, outs, quiet, verbose)
+        done = _diagnose(args, cases, outs, blocks, quiet, verbose)
     except Exception as err:  # noqa: BLE001 -- re-raised once every process knows
         error = err
     totals = allgather_ints([done, failed, error is not None])
@@ -283,14 +286,11 @@ def run(args: argparse.Namespace) -> int:
     return 2 if totals[:, 1].any() else 0
 
 
-def _diagnose(args, cases: list, outs, quiet, verbose) -> int:
-    """Diagnose the cases read (`(index, case, out)`) in one call padded as the
-    whole run (`padding`), writing each as soon as it is done; the number
-    diagnosed."""
-    from .._errors import UserInputError
-    from ..diagnosis.diagnose import DiagnosisNotFinite, diagnose_many
+def _diagnose(args, cases: list, outs, blocks, quiet, verbose) -> int:
+    """Diagnose the cases read (`(index, case, out)`), one `diagnose_many` call per
+    block of `blocks` (`share`) padded as the whole run (`padding`), writing each
+    case as soon as it is done; the number diagnosed."""
     from ..diagnosis.nominal_fit import fit_nominal
-    from ..diagnosis.report import write_diagnosis
     from ..io import model_to_dict, write_json
 
     item, where, read = {}, {}, {}
@@ -309,9 +309,38 @@ def _diagnose(args, cases: list, outs, quiet, verbose) -> int:
         where[i] = (case.folder, out, name, source)
     if not item:
         return 0
-    members = sorted(item)
-    rank = {i: k for k, i in enumerate(members)}  # lines in input order
+    calls = [[i for i in b if i in item] for b in blocks]
+    # lines per block, in input order within it
+    lines = [i for members in calls for i in sorted(members)]
+    rank = {i: k for k, i in enumerate(lines)}
     printer = _InOrder(quiet, len(item))
+    pad = padding(args.cases, read)
+    try:
+        for members in filter(None, calls):
+            _call(
+                args,
+                members,
+                item,
+                where,
+                pad,
+                lambda i, line: printer.add(rank[i], line),
+                verbose,
+            )
+    finally:
+        printer.close()
+    return len(item)
+
+
+def _call(
+    args, members: list[int], item: dict, where: dict, pad, show, verbose
+) -> None:
+    """One block: `diagnose_many` of the cases `members` (in block order) with the
+    run's padding `pad`; each case written as soon as it is done and its line
+    passed to `show(i, line)`."""
+    from .._errors import UserInputError
+    from ..diagnosis.diagnose import DiagnosisNotFinite, diagnose_many
+    from ..diagnosis.report import write_diagnosis
+
     prior = {}
     if args.nominal_uncertainty is not None:
         prior["nominal_uncertainty"] = args.nominal_uncertainty
@@ -323,14 +352,14 @@ def _diagnose(args, cases: list, outs, quiet, verbose) -> int:
             from ..plotting.diagnosis import save_diagnosis_figures
 
             save_diagnosis_figures(d, out, name)
-        printer.add(rank[members[j]], _line(name, d, verbose))
+        show(members[j], _line(name, d, verbose))
 
     try:
         diagnose_many(
             [item[i] for i in members],
             on_result=write,
             rule=args.rule,
-            padding=padding(args.cases, read),
+            padding=pad,
             **prior,
         )
     except DiagnosisNotFinite as err:
@@ -339,6 +368,3 @@ def _diagnose(args, cases: list, outs, quiet, verbose) -> int:
         raise UserInputError(
             f"{args.cases[0] if len(args.cases) == 1 else 'cases'}: {err}"
         ) from None
-    finally:
-        printer.close()
-    return len(item)

@@ -97,9 +97,10 @@ def _group(n: int) -> int:
 class Padding:
     """The padding of a run: the parameter-vector width and, per length group
     (`_group`), the padded record length. A case's numbers depend on its padding
-    (XLA's tiling, hence rounding, follows the array shapes), not on the other
-    cases fitted with it, so cases given one run's padding have the same numbers
-    whichever call diagnoses them."""
+    (XLA's tiling, hence rounding, follows the array shapes) and, in the last
+    digits, on the cases batched with it: a run cut into blocks (`run_blocks`),
+    each one call with the run's padding, has the same numbers whichever process
+    diagnoses which block."""
 
     n_params: int
     lengths: tuple[tuple[int, int], ...]  # (length group, padded length), sorted
@@ -127,6 +128,30 @@ def run_padding(cases: Iterable[tuple[Hammerstein | None, int]]) -> Padding:
         n_params = max(n_params, width)
         lengths[_group(n)] = max(lengths.get(_group(n), 0), _length_group(n))
     return Padding(n_params, tuple(sorted(lengths.items())))
+
+
+# Cases per `diagnose_many` call of a run cut into blocks (`run_blocks`): each
+# block's cases are batched together (`schedule.run_queue`), so a block of at
+# least `CASES_PER_BATCH` cases keeps the batches full. Its cost, measured on 120
+# A0 cases (1 process, 2 cores under a load of 12-17, old and new alternating
+# twice): blocks of 32 took 333 and 319 s against 282 and 259 s for one call of
+# all 120 (+20 %, 2.7 against 2.25 s per case), probably the tail of part-filled
+# batches each call ends with (`schedule.run_queue`; not profiled). Blocks of 64,
+# once: 226 s against 224 s (load 8-10).
+CASES_PER_CALL = 32
+
+
+def run_blocks(n_cases: int) -> list[range]:
+    """The blocks of a run of `n_cases` cases, positions in the run's order (for
+    `hamjax diagnose`, the case folders sorted by path): `CASES_PER_CALL`
+    consecutive cases each, the last one shorter.
+
+    Each block is one `diagnose_many` call with the run's padding (`run_padding`
+    of all its cases). A case's numbers depend on its padding and on the cases
+    batched with it, both fixed by the block, so they depend only on the run's
+    case list, never on which process (or how many) diagnoses which block."""
+    size = CASES_PER_CALL
+    return [range(k, min(k + size, n_cases)) for k in range(0, n_cases, size)]
 
 
 def _evidence_samples(att: Attribution, mse: dict) -> float:
@@ -229,8 +254,8 @@ def diagnose_many(
     "likelihood", `decide.decide`). `on_result(i, diagnosis)` is
     called as soon as case `i` is done, so a caller can write each result while the
     others are still being fitted. `padding`: that of a whole run (`run_padding`
-    of all its cases), so that a case split off into another call keeps its
-    numbers; None: `run_padding(items)`.
+    of all its cases), for a call of one block of it (`run_blocks`); None:
+    `run_padding(items)`.
 
     **Raises:** `DiagnosisNotFinite` (its `index` the case) if a case's gaps, noise
     floor or simulated outputs are NaN or inf.

@@ -1,4 +1,5 @@
 from .csv import (
+    count_rows as count_rows,
     read_csv as read_csv,
     sampling_period as sampling_period,
     write_csv as write_csv,

@@ -43,6 +43,23 @@ def _content_lines(text: str) -> tuple[list[str], list[int]]:
     return lines, numbers
 
 
+def _split(text: str) -> tuple[tuple[int, str] | None, list[str], list[int]]:
+    """`(header, rows, numbers)`: the first content line (`_content_lines`) with
+    its number (None: no content line), the data rows after it and their numbers."""
+    lines, numbers = _content_lines(text)
+    if not lines:
+        return None, [], []
+    return (numbers[0], lines[0]), lines[1:], numbers[1:]
+
+
+def count_rows(path: str | os.PathLike) -> int:
+    """The number of data rows `read_csv(path)` reads (the content lines after the
+    header: blank and `#` comment lines skipped), without parsing them.
+
+    **Raises:** `UserInputError` if the file does not read (`files.read_text`)."""
+    return len(_split(read_text(Path(path)))[1])
+
+
 def _header(path: Path, lineno: int, line: str) -> list[str]:
     """Column names of the header line: unnamed columns (R's or pandas' row index)
     are `""`; a repeated name is refused."""
@@ -147,22 +164,21 @@ def read_csv(
     **Raises:** `UserInputError` naming the file, and the line where there is one.
     """
     path = Path(path)
-    lines, numbers = _content_lines(read_text(path))
-    if not lines:
+    first, rows, numbers = _split(read_text(path))
+    if first is None:
         raise UserInputError(f"{path}: empty file (no header line)")
-    header = _header(path, numbers[0], lines[0])
+    header = _header(path, *first)
     missing = [c for c in required if c not in header]
     if missing:
         hint = (
             "; the delimiter must be a comma"
-            if len(header) == 1 and any(s in lines[0] for s in ";\t")
+            if len(header) == 1 and any(s in first[1] for s in ";\t")
             else ""
         )
         raise UserInputError(
             f"{path}: missing column(s) {', '.join(missing)} (header is "
             f"{','.join(header)}; expected {','.join(required)}{hint})"
         )
-    rows, numbers = lines[1:], numbers[1:]
     if len(rows) < 2:
         raise UserInputError(f"{path}: needs at least 2 rows of data; got {len(rows)}")
     keep = [i for i, name in enumerate(header) if name]

@@ -1,7 +1,7 @@
 """`hamjax diagnose CASE... --coordinator ... --num-processes N --process-id I`:
-case k of the sorted case list to process k mod N, every process padding as the
-whole run; 2 processes on localhost write every case once and exactly the
-1-process files."""
+the sorted case list cut into blocks (`run_blocks`), block b to process b mod N,
+every block one call padded as the whole run; 2 processes on localhost write
+every case once and exactly the 1-process files."""
 
 import re
 import subprocess
@@ -12,6 +12,8 @@ import jax.random as jr
 import pytest
 from helpers import child_env, free_port
 
+import hamjax.diagnosis.diagnose as diagnose_module
+from hamjax.cli import diagnose as cli
 from hamjax.cli.diagnose import _fingerprint, _sizes, padding, share
 from hamjax.cli.main import build_parser, main
 from hamjax.diagnosis.case import read_case
@@ -37,15 +39,28 @@ def _cases(root: Path) -> list[Path]:
     for k, (effect, n) in enumerate(zip(EFFECTS, SAMPLES, strict=True)):
         plant, dt, est, val = tiny_case(jr.key(k), effect, n=n, noise=1e-3)
         folder = root / f"c{k}_{effect}"
-        folder.mkdir(parents=True)
         if k == 1:
             plant = Hammerstein(PiecewiseLinear(k1=1.0, k2=1.0), plant.linear)
-        if k < len(EFFECTS) - 1:
-            write_json(folder / "model.json", model_to_dict(plant, dt))
-        write_csv(folder / "estimation.csv", est)
-        write_csv(folder / "validation.csv", val)
+        _write(folder, plant if k < len(EFFECTS) - 1 else None, dt, est, val)
         folders.append(folder)
     return folders
+
+
+def _write(folder: Path, plant, dt, est, val) -> None:
+    """A case folder; without model.json where `plant` is None."""
+    folder.mkdir(parents=True)
+    if plant is not None:
+        write_json(folder / "model.json", model_to_dict(plant, dt))
+    write_csv(folder / "estimation.csv", est)
+    write_csv(folder / "validation.csv", val)
+
+
+# `hamjax diagnose` in blocks of one case (`run_blocks`), so that 3 cases split
+# over 2 processes (blocks c0, c2 | c1)
+ONE_CASE_BLOCKS = (
+    "import sys; import hamjax.diagnosis.diagnose as d; d.CASES_PER_CALL = 1; "
+    "from hamjax.cli.main import main; sys.exit(main(sys.argv[1:]))"
+)
 
 
 def _diagnose(cases, out: Path, *extra: str) -> subprocess.Popen:
@@ -54,7 +69,7 @@ def _diagnose(cases, out: Path, *extra: str) -> subprocess.Popen:
     # programs, so the same numbers; `_runtime.use_compilation_cache`)
     cache = {"HAMJAX_CACHE_DIR": str(cases[0].parent.parent / "xla")}
     return subprocess.Popen(
-        [sys.executable, "-m", "hamjax", "diagnose", *map(str, cases)]
+        [sys.executable, "-c", ONE_CASE_BLOCKS, "diagnose", *map(str, cases)]
         + ["--out", str(out), *extra],
         env=child_env(1) | cache,  # 1 device per process in both runs
         cwd=REPO,
@@ -99,7 +114,8 @@ def _named(text: str) -> set[str]:
 
 
 @pytest.mark.slow
-def test_two_processes_write_the_one_process_files(tmp_path):
+def test_two_processes_write_the_one_process_files(tmp_path, monkeypatch):
+    monkeypatch.setattr(diagnose_module, "CASES_PER_CALL", 1)  # as the children
     cases = _cases(tmp_path / "cases")
     ((code, *_),) = _wait([_diagnose(cases, tmp_path / "one")])
     assert code == 0
@@ -112,9 +128,9 @@ def test_two_processes_write_the_one_process_files(tmp_path):
     # Each case diagnosed by one process (case k of the sorted list -> k mod 2),
     # whose own padding is not the whole run's: the run's padding was used.
     printed = [_named(out + err) for _, out, err in two]
-    owners = share(cases, num_processes=2, process_id=0)
+    owners = [i for b in share(cases, num_processes=2, process_id=0) for i in b]
     assert printed[0] == {cases[i].name for i in owners}
-    (alone,) = share(cases, num_processes=2, process_id=1)
+    ((alone,),) = share(cases, num_processes=2, process_id=1)
     assert padding([cases[alone]]) != padding(cases)
     assert printed[0] | printed[1] == {c.name for c in cases}
     assert not printed[0] & printed[1]
@@ -130,19 +146,53 @@ def test_two_processes_write_the_one_process_files(tmp_path):
     assert _files(tmp_path / "two") == one_files
 
 
-def test_share_covers_every_case_once_whatever_the_order_and_count():
+def test_blocks_cover_every_case_once_whatever_the_process_count(monkeypatch):
+    monkeypatch.setattr(diagnose_module, "CASES_PER_CALL", 3)
     cases = [Path(f"data/case{k % 7}") for k in (5, 3, 0, 6, 1, 4, 2, 3, 9, 8)]
-    # sorted by path (a path given twice: by position), dealt out in turn
+    # sorted by path (a path given twice: by position), cut into consecutive blocks
     order = sorted(range(len(cases)), key=lambda i: (str(cases[i]), i))
+    blocks = [order[k : k + 3] for k in range(0, len(order), 3)]
+    assert share(cases, num_processes=1, process_id=0) == blocks
     for n in (1, 2, 3, 5, 12):
         shares = [share(cases, num_processes=n, process_id=p) for p in range(n)]
-        assert shares == [order[p::n] for p in range(n)]
-        assert sorted(i for s in shares for i in s) == list(range(10))
-        assert max(map(len, shares)) - min(map(len, shares)) <= 1
-    # a path's process follows from the paths alone, not from the input order
+        # process p: blocks p, p + n, ...; the blocks themselves do not depend on n
+        assert shares == [blocks[p::n] for p in range(n)]
+        assert sorted(i for s in shares for b in s for i in b) == list(range(10))
+    # a path's block follows from the paths alone, not from the input order
     shuffled = [cases[i] for i in (9, 0, 8, 1, 7, 2, 6, 3, 5, 4)]
-    as_paths = lambda cs: [str(cs[i]) for i in share(cs, num_processes=3, process_id=1)]  # noqa: E731
-    assert sorted(as_paths(shuffled)) == sorted(as_paths(cases))
+    as_paths = lambda cs: [  # noqa: E731
+        [str(cs[i]) for i in b] for b in share(cs, num_processes=2, process_id=1)
+    ]
+    assert as_paths(shuffled) == as_paths(cases)
+
+
+@pytest.mark.slow
+def test_each_process_share_diagnosed_in_process_has_the_one_process_numbers(
+    tmp_path, monkeypatch
+):
+    # 5 cases in blocks of 2 (3 blocks): 2 processes take blocks 0, 2 | 1, each
+    # share diagnosed by the function a process of `hamjax diagnose` runs
+    monkeypatch.setattr(diagnose_module, "CASES_PER_CALL", 2)
+    root = tmp_path / "cases"
+    cases = _cases(root)
+    for k, effect in enumerate(("dead_zone", "time_delay"), start=len(cases)):
+        cases.append(root / f"c{k}_{effect}")
+        _write(cases[-1], *tiny_case(jr.key(k), effect, n=200, noise=1e-3))
+    parse = build_parser(["diagnose"]).parse_args
+
+    def run(out: Path, n_proc: int) -> dict[str, bytes]:
+        args = parse(["diagnose", *map(str, cases), "--out", str(out)])
+        outs, _ = cli._plan(args, notes=False)
+        for me in range(n_proc):
+            blocks = share(cases, num_processes=n_proc, process_id=me)
+            read, failed = cli._read_cases(args, outs, [i for b in blocks for i in b])
+            assert failed == 0
+            assert cli._diagnose(args, read, outs, blocks, True, False) == len(read)
+        return _files(out)
+
+    one = run(tmp_path / "one", 1)
+    assert len(one) == 2 * len(cases) + 1  # + nominal_model.json once
+    assert run(tmp_path / "two", 2) == one  # every file, byte for byte
 
 
 def test_padding_from_the_case_list_alone(tmp_path):

@@ -1,15 +1,18 @@
-"""`diagnose_many(padding=)`: a case diagnosed in a call of its own, padded as a
-whole run, has exactly the numbers of that whole run (what lets `hamjax
-diagnose` split a run over processes)."""
+"""`diagnose_many(padding=)`: two tiny cases, each diagnosed in a call of its own
+padded as the whole run, have exactly the numbers of that whole run (with more
+batch-mates the last digits may differ: `hamjax diagnose` splits a run into the
+fixed blocks of `run_blocks`, tested here too)."""
 
 import jax.random as jr
 import numpy as np
 import pytest
 
+import hamjax.diagnosis.diagnose as diagnose_module
 from hamjax.diagnosis.diagnose import (
     Padding,
     _fitted_n_params,
     diagnose_many,
+    run_blocks,
     run_padding,
 )
 from hamjax.diagnosis.layout import n_free_parameters
@@ -65,3 +68,17 @@ def test_run_padding_takes_the_widest_and_longest():
     # a call whose cases do not fit in the padding given is refused
     with pytest.raises(ValueError, match="do not fit"):
         diagnose_many(_items(), padding=Padding(pad.n_params, ((8192, 512),)))
+
+
+@pytest.mark.parametrize("size", [1, 2, 3, 32])
+def test_run_blocks_cut_the_run_into_consecutive_blocks(size, monkeypatch):
+    monkeypatch.setattr(diagnose_module, "CASES_PER_CALL", size)
+    for n in (0, 1, size - 1, size, size + 1, 3 * size, 3 * size + 2):
+        blocks = run_blocks(n)
+        # every position once, in order, in blocks of `size` but the last
+        assert [k for b in blocks for k in b] == list(range(n))
+        assert all(len(b) == size for b in blocks[:-1])
+        assert all(0 < len(b) <= size for b in blocks)
+        assert len(blocks) == -(-n // size)  # ceil(n / size)
+        # a longer run keeps the full blocks of a shorter one
+        assert run_blocks(n + size)[: n // size] == blocks[: n // size]

@@ -13,7 +13,14 @@ from hypothesis import HealthCheck, given, settings, strategies as st
 
 from hamjax._errors import UserInputError
 from hamjax.diagnosis.case import read_case
-from hamjax.io import load_model, read_csv, read_data, read_design, write_csv
+from hamjax.io import (
+    count_rows,
+    load_model,
+    read_csv,
+    read_data,
+    read_design,
+    write_csv,
+)
 
 
 T = np.arange(60) * 0.05
@@ -59,9 +66,12 @@ def _assert_matches_reference(cols: dict) -> None:
     ids=["bom", "r-quoted", "r-row-index", "pandas-index", "comments", "crlf"],
 )
 def test_csv_dialects_read_like_the_plain_file(tmp_path, text, encoding):
-    cols = read_csv(_write(tmp_path / "d.csv", text, encoding))
+    path = _write(tmp_path / "d.csv", text, encoding)
+    cols = read_csv(path)
     assert "" not in cols  # the unnamed index column is dropped
     _assert_matches_reference(cols)
+    # the row count, without parsing: the rows written, whatever the dialect
+    assert count_rows(path) == T.size
 
 
 @pytest.mark.parametrize("offset, dt", [(0.0, 1e-3), (1000.0, 0.01), (5e4, 0.25)])
@@ -183,6 +193,8 @@ def test_fuzz_csv_reader(text, required):
         if cols is not None:
             lengths = {cols[c].shape[0] for c in required}
             assert len(lengths) == 1 and lengths.pop() >= 2
+            # `count_rows` counts the rows the reader parsed
+            assert count_rows(p) == cols[required[0]].shape[0]
             assert all(np.all(np.isfinite(cols[c])) for c in required)
 
 

@@ -47,7 +47,7 @@ Decisions, in order:
   $-(S_{est} + S_{val}) / 2\\sigma^2$, whose estimation part, at its own
   maximum over $p$ parameters (re-fit and effect slots), is corrected by
   Akaike's $p$: the class minimising $S_{est} + S_{val} + 2 p \\hat\\sigma^2$
-  (`_both_records_aic`, $\\hat\\sigma^2$ the validation MSE of the validation
+  (`structural_choice`, $\\hat\\sigma^2$ the validation MSE of the validation
   choice). Two records carry twice the information of one, so where a physical
   pair is close on validation (stick-slip friction against backlash, friction
   against a feedback spring) the estimation record still speaks; unlike the
@@ -309,14 +309,34 @@ def _over_noise(noise_c: Candidate, r_est: np.ndarray, r_val: np.ndarray, sig) -
     }
 
 
-def _both_records_aic(prep: Prepared, sse: np.ndarray, c: Candidate, s2: float):
-    """$S_{est} + S_{val} + 2 p\\,\\hat\\sigma^2$ of candidate `c`: minus twice its
-    Gaussian log-likelihood on both records (times $\\hat\\sigma^2$), the
-    estimation part corrected by Akaike's $2p$ for the $p$ parameters fitted
-    on it (module docstring)."""
-    n_slots = prep.arrays.anchor.shape[0]
-    p = int(np.sum(np.asarray(prep.rows[c.row][1].idx) < n_slots))
-    return float(sse[c.row] + np.sum(c.residual**2) + 2 * p * s2)
+def structural_choice(
+    structural: list, est_sse: dict, n_params: dict
+) -> tuple[Candidate, dict]:
+    """The structural class named (module docstring, *Which structural class*):
+    the lowest validation MSE, unless validation cannot tell it ($z \\le$
+    `Z_CONFIRM`) from the class minimising both records' criterion
+    $S_{est} + S_{val} + 2 p\\,\\hat\\sigma^2$ (minus twice the Gaussian
+    log-likelihood on both records times $\\hat\\sigma^2$, Akaike's $2p$ on the
+    estimation part, $\\hat\\sigma^2$ the validation MSE of the validation choice).
+
+    `est_sse`, `n_params`: each class's estimation SSE and number of fitted
+    parameters (re-fit and effect slots), by name. Returns the class and the
+    record of the tie (empty when the two choices agree)."""
+    best_v = min(structural, key=lambda c: c.gap_after)
+    s2 = float(np.mean(best_v.residual**2))
+    if not np.isfinite(s2):
+        return best_v, {}
+
+    def both(c: Candidate) -> float:
+        val = float(np.sum(c.residual**2))
+        return float(est_sse[c.effect] + val + 2 * n_params[c.effect] * s2)
+
+    best_b = min(structural, key=both)
+    if best_b is best_v:
+        return best_v, {}
+    z = improvement_z(best_b.residual, best_v.residual)
+    tie = {"z": z, "validation": best_v.effect, "both_records": best_b.effect}
+    return (best_v if z > Z_CONFIRM else best_b), tie
 
 
 def attribute(prep: Prepared, fit: dict) -> Attribution:
@@ -385,16 +405,17 @@ def attribute(prep: Prepared, fit: dict) -> Attribution:
     if gap_sig:
         pm = cands["parameter_mismatch"]
         structural = [c for c in det if c.effect != "parameter_mismatch"]
-        best_s = min(structural, key=lambda c: c.gap_after)
-        # validation cannot tell the best two apart (z <= Z_CONFIRM): all the
-        # evidence decides, both records' likelihood (module docstring)
-        s2 = float(np.mean(best_s.residual**2))
-        best_b = min(structural, key=lambda c: _both_records_aic(prep, sse, c, s2))
-        if best_b is not best_s and np.isfinite(s2):
-            z_tie = improvement_z(best_b.residual, best_s.residual)
-            tests["structural_tie"] = {"z": z_tie, "validation": best_s.effect}
-            if not z_tie > Z_CONFIRM:
-                best_s = best_b
+        n_slots = prep.arrays.anchor.shape[0]
+        best_s, tie = structural_choice(
+            structural,
+            {c.effect: float(sse[c.row]) for c in structural},
+            {
+                c.effect: int(np.sum(np.asarray(prep.rows[c.row][1].idx) < n_slots))
+                for c in structural
+            },
+        )
+        if tie:
+            tests["structural_tie"] = tie
         s_sig, z_s = sig(pm.residual, best_s.residual, floor_best**2, z_star=Z_STRUCT)
         p_sig, z_p = sig(r_before, pm.residual, floor_best**2)
         tests["structural_vs_refit"] = {

@@ -400,6 +400,7 @@ def prepare(
     w_val = _response_numpy(plant.linear, u_val, dt)
     v = est["v"]
     dw = np.diff(w_est) / dt if n_est > 1 else np.zeros(1)
+    t_dom = dominant_time_constant(nom.den, nom.is_ct, dt)
     ctx = StartContext(
         v_min=float(v.min()),
         v_max=float(v.max()),
@@ -423,6 +424,7 @@ def prepare(
         )
         if _looks_closed_loop(np.asarray(est["y"]), np.asarray(v))
         else (),
+        t_dom=float(t_dom),
     )
     b_disc, ct_num, ct_pad, den_slots, den_lead, den_free = _linear_templates(nom, dt)
     names = slot_names(N_MAX)
@@ -472,7 +474,6 @@ def prepare(
         NL_TABULATED: ("out_scale",),
         NL_BACKLASH: ("out_scale",),
     }.get(nom.nl_kind, ("gain",))
-    t_dom = dominant_time_constant(nom.den, nom.is_ct, dt)
     taus_tried = delay_shortlist(
         est["y"], w_est, max_delay=delay_range(t_dom, n_est), t_dom=t_dom
     )

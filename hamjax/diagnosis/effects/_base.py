@@ -28,6 +28,9 @@ class StartContext(eqx.Module):
     # (S, J, gain, jump slot) of the stick-slip variants that fit the estimation record
     # best on a grid (`layout.stick_slip_profile`), best first; empty when not computed
     stick_slip: tuple = ()
+    # the nominal linear block's slowest time constant in samples
+    # (`time_delay.dominant_time_constant`; inf when not stable, 0 without a pole)
+    t_dom: float = float("inf")
 
 
 class AbstractEffect(eqx.Module):

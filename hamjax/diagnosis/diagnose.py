@@ -136,9 +136,10 @@ def run_padding(cases: Iterable[tuple[Hammerstein | None, int]]) -> Padding:
 # A0 cases (1 process, 2 cores under a load of 12-17, old and new alternating
 # twice): blocks of 32 took 333 and 319 s against 282 and 259 s for one call of
 # all 120 (+20 %, 2.7 against 2.25 s per case), probably the tail of part-filled
-# batches each call ends with (`schedule.run_queue`; not profiled). Blocks of 64,
-# once: 226 s against 224 s (load 8-10).
-CASES_PER_CALL = 32
+# batches each call ends with (`schedule.run_queue`; not profiled). Quiet machine
+# (load 1.6): 120 cases in blocks of 32 / 64 / one call 81 / 69 / 61 s; 240 cases
+# in blocks of 128 105 s against one call 99 s (+6 %), hence 128.
+CASES_PER_CALL = 128
 
 
 def run_blocks(n_cases: int) -> list[range]:

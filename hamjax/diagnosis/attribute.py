@@ -130,6 +130,7 @@ from .layout import (
     Prepared,
     best_row_per_class,
     finite_sse,
+    n_fitted,
     validation_sse,
 )
 from .noise_fit import noise_fit_numpy
@@ -278,8 +279,7 @@ def _nested_lr(
     from, $2 \\ln(m / \\alpha)$, which bounds the $\\chi^2_1$ one too. Because the
     test trusts the noise to be white and the re-fit to be at its optimum, the
     candidate must also improve on the re-fit on validation with $z > 2$."""
-    n_slots = prep.arrays.anchor.shape[0]
-    p = int(np.sum(np.asarray(prep.rows[best.row][1].idx) < n_slots))
+    p = n_fitted(prep, best.row)
     s2 = sse[best.row] / max(prep.n_est - p, 1)
     lr = float((sse[pm.row] - sse[best.row]) / s2) if s2 > 0 else 0.0
     threshold = 2.0 * np.log(m / LR_ALPHA)
@@ -408,14 +408,10 @@ def attribute(prep: Prepared, fit: dict) -> Attribution:
     if gap_sig:
         pm = cands["parameter_mismatch"]
         structural = [c for c in det if c.effect != "parameter_mismatch"]
-        n_slots = prep.arrays.anchor.shape[0]
         best_s, tie = structural_choice(
             structural,
             {c.effect: float(sse[c.row]) for c in structural},
-            {
-                c.effect: int(np.sum(np.asarray(prep.rows[c.row][1].idx) < n_slots))
-                for c in structural
-            },
+            {c.effect: n_fitted(prep, c.row) for c in structural},
         )
         if tie:
             tests["structural_tie"] = tie

@@ -94,7 +94,13 @@ from .attribute import (
 )
 from .augmented import NL_PIECEWISE
 from .fit import nominal_mask
-from .layout import Prepared, best_row_per_class, finite_sse, validation_sse
+from .layout import (
+    Prepared,
+    best_row_per_class,
+    finite_sse,
+    n_fitted,
+    validation_sse,
+)
 from .noise_fit import NOISE_MODELS, NOISE_PARAMETERS, noise_family_numpy
 from .residuals import batch_means_se
 
@@ -203,7 +209,6 @@ def decide(prep: Prepared, fit: dict) -> Attribution:
     y_val = np.asarray(prep.arrays.y_val)[:n_val]
     sse = finite_sse(fit)
     best_rows = best_row_per_class(prep, sse, validation_sse(prep, fit))
-    n_slots = prep.arrays.anchor.shape[0]
     # deterministic parts: (class, row, p_D, est residual, val residual)
     parts = [("none", -1, 0, y_est - prep.w_est, y_val - prep.w_val)]
     prior_cost = {"none": 0.0}
@@ -215,7 +220,7 @@ def decide(prep: Prepared, fit: dict) -> Attribution:
         r_v = y_val - np.asarray(fit["y_val"][row])[:n_val]
         if not (np.all(np.isfinite(r_e)) and np.all(np.isfinite(r_v))):
             continue
-        p = int(np.sum(np.asarray(prep.rows[row][1].idx) < n_slots))
+        p = n_fitted(prep, row)
         parts.append((effect, row, p, r_e, r_v))
         prior_cost[effect] = prior_term(prep, fit, row)
     params, e_est, e_val = noise_family_numpy(

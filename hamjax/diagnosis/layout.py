@@ -568,6 +568,12 @@ def validation_sse(prep: Prepared, fits: dict) -> np.ndarray:
     return np.where(np.isfinite(sse), sse, np.inf)
 
 
+def n_fitted(prep: Prepared, row: int) -> int:
+    """Parameters row `row` fits: its free slots among the re-fit's and the
+    effect's (`prep.arrays.anchor`), not the padding."""
+    return int(np.sum(np.asarray(prep.rows[row][1].idx) < prep.arrays.anchor.shape[0]))
+
+
 def best_row_per_class(
     prep: Prepared, sse: np.ndarray, val_sse: np.ndarray
 ) -> dict[str, int]:
@@ -591,12 +597,11 @@ def best_row_per_class(
         if name not in table or sse[k] < sse[table[name]]:
             table[name] = k
     threshold = 2.0 * np.log(1.0 / LR_ALPHA)
-    n_slots = prep.arrays.anchor.shape[0]
     for name, k in best_ext.items():
         if name not in best:
             best[name] = k
             continue
-        p = int(np.sum(np.asarray(prep.rows[k][1].idx) < n_slots))
+        p = n_fitted(prep, k)
         s2 = sse[k] / max(prep.n_est - p, 1)
         gain = sse[best[name]] - sse[k]
         lr = gain / s2 if s2 > 0 else np.inf * np.sign(gain)

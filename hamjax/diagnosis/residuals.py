@@ -260,8 +260,9 @@ def feedback_test(
     not. The order is therefore at least `FEEDBACK_HOLDS` times the longest
     hold (`longest_hold`; at most a twentieth of the record). Not
     applicable to an exactly periodic input (`period_of`: its future is its
-    past, so the output's past adds nothing to an exact predictor), a constant input, or a record too short for the regression
-    (fewer than $4(p + m)$ or $2B$ regression rows)."""
+    past, so the output's past adds nothing to an exact predictor), a constant
+    input, or a record too short for the regression (fewer than $4(p + m)$ or
+    $2B$ regression rows)."""
     from scipy import stats
 
     s = np.asarray(s, float) - np.mean(s)

@@ -61,36 +61,49 @@ Decisions, in order:
   the re-fit, never chooses it.
 - otherwise a *noise-model* effect (`drift`, `coloured_noise`) when its one-step-ahead
   predictor of the nominal residual is significant against the white-noise
-  predictor (the same two conditions);
+  predictor (the same two conditions). The two classes are told apart by the
+  contract's definitions, not by a constant chosen on cases: drift is a trend
+  *plus* the white noise, coloured noise has no white part, and a local level's
+  white share of its innovations is $1 - \\alpha$ (`effects/drift.py`), so drift
+  is the local level with $\\alpha \\le 1/2$ and coloured noise the AR(1) or the
+  local level of higher gain; between the two (one parameter each) the higher
+  likelihood on the estimation record chooses, validation judges it. (Before:
+  the lower validation error among an unrestricted local level and the AR(1),
+  which named ARMA and flicker noise `drift`.)
 - otherwise `none`;
 - finally, a deterministic explanation $D$ that closes less than 80 % of the gap
   is replaced by a significant noise-model effect $M$ (`drift` or
   `coloured_noise`) whose one-step-ahead gap is lower (a trend partly soaked up
-  by a re-fit on estimation data is still a trend), **unless** $D$ with the same
-  noise model on top still improves significantly on the nominal model with it
-  (`_over_noise`): $M$, refitted on $D$'s own estimation residual, gives the
-  one-step-ahead errors $\\varepsilon_{D+M}$ of $D$ on validation, compared with
-  $\\varepsilon_{nom+M}$ (the $M$ candidate itself) by the same two conditions at
-  $z^\\star = 3.5$.
+  by a re-fit on estimation data is still a trend), **unless** $D$'s residual,
+  seen through the same noise predictor, still improves significantly on the
+  nominal model's (`_over_noise`): $A(q)$, $M$'s one-step-ahead error filter
+  fitted on the nominal's estimation residual, gives
+  $\\varepsilon_{D} = A\\,r_D$ on validation, compared with
+  $\\varepsilon_{nom} = A\\,r_{nom}$ (the $M$ candidate itself) by the same two
+  conditions at $z^\\star = 3.5$.
 
-  *Derivation of the veto.* The comparison is like for like: the same noise
-  model class on both sides, each side's noise parameter fitted on its own
-  estimation residual, both judged by one-step-ahead prediction on the
-  validation record. Under "the gap is noise of class $M$" ($y = w + e'$, no
-  deterministic effect) both predictors whiten the same process and differ by
-  the filtered difference $\\delta$ of two predictions fixed by the estimation
-  data, so $z$ is the held-out statistic of condition 1 and keeps its one-sided
-  level: the veto keeps a deterministic name on a noise case with probability
-  about $10^{-3}$ per candidate, Bonferroni-bounded over the candidates $D$ was
-  chosen from (the level of the deterministic-gap step, which this step
-  re-judges with the noise modelled). Under "effect $s$ plus noise of class
-  $M$", $\\varepsilon_{D+M}$ is the innovation and $\\varepsilon_{nom+M}$ adds
-  $A(q)\\,s$, $A$ the whitening filter of $M$: $D$ is judged on the part of the
-  effect that a coloured residual (or a local level) cannot predict one step
-  ahead. Without the veto, the bare comparison "one-step gap of $M$ below the
-  simulation gap of $D$" (unlike things) names `coloured_noise` for a
-  structural effect under coloured noise whenever the predictable part of the
-  coloured residual exceeds what $D$ leaves.
+  *Derivation of the veto.* The comparison is like for like: one whitening filter
+  on both sides, both judged by one-step-ahead prediction on the validation
+  record. Under "the gap is noise of class $M$" (no deterministic effect) the
+  nominal residual is the noise $n$ and $D$'s is $n - \\delta$, $\\delta$ the
+  difference of two predictions fixed by the estimation data: with $A n$ the
+  innovations, independent of $\\delta$, the per-sample evidence
+  $d = 2 (A n)(A\\delta) - (A\\delta)^2$ has mean $-\\overline{(A\\delta)^2} \\le 0$,
+  so $z$ is the held-out statistic of condition 1 and keeps its one-sided level:
+  the veto keeps a deterministic name on a noise case with probability about
+  $10^{-3}$ per candidate, Bonferroni-bounded over the candidates $D$ was chosen
+  from (the level of the deterministic-gap step, which this step re-judges with
+  the noise modelled). Under "effect $s$ plus noise", $\\varepsilon_{nom} = A n +
+  A s$ and $\\varepsilon_D = A n + A (s - \\hat s_D)$: $D$ is judged on the part
+  of the effect that the noise predictor cannot forecast one step ahead and $D$
+  reproduces (corners, jumps, what the input drives); what $D$ leaves that is
+  smooth is forecast alike on both sides. Without the veto, the bare comparison
+  "one-step gap of $M$ below the simulation gap of $D$" (unlike things) names a
+  noise model for a structural effect whenever the coloured residual is more
+  predictable than what $D$ leaves. (The veto before refitted $M$ on $D$'s own
+  estimation residual, which $D$ has made white: an imperfect $D$ was then judged
+  without the filter that forecasts what it leaves on validation, and a
+  structural effect closing 50-80 % of the gap lost to the noise model.)
 
   *Why the 0.8 stays.* The veto alone (replacing the 80 % condition, and the
   lower-gap one, by it) was measured and rejected: one-step prediction by a
@@ -109,6 +122,13 @@ Decisions, in order:
   0.942 / 0.875 / 0.992 -> 0.946 / 0.875 / 0.992; family B (held out) seeds 0 / 1
   0.787 / 0.796 -> 0.800 / 0.808, structural cases named a noise model 47 -> 37
   of 320; no `none`, `drift` or `coloured_noise` case changed its name.
+  The one-filter form of the veto and the drift/coloured split by the white
+  share (both derived, no constant chosen on cases; 2026-12-02): family A
+  realistic seed 0 0.963 -> 0.963 (no case changed); family B seed 0 (a
+  development set) 0.792 -> 0.829 (split) -> 0.850 (veto); family B seed 9
+  (held out, looked at only in aggregate) 0.838 -> 0.846 -> 0.854, its ECE
+  0.136 -> 0.067; control loops seed 0 / seed 1 stiction recall 0.800 / 0.525
+  -> 0.800 / 0.600, false alarms unchanged (0 / 2 of 40).
 
 The noise floor $\\hat\\sigma$ is the white-noise level read off the upper half
 band of the chosen model's validation residual (`residuals.noise_floor_hf`).
@@ -133,7 +153,7 @@ from .layout import (
     n_fitted,
     validation_sse,
 )
-from .noise_fit import noise_fit_numpy
+from .noise_fit import noise_fit_numpy, predictor_errors
 from .residuals import improvement_z, noise_floor_hf
 
 
@@ -160,6 +180,7 @@ class Candidate:
     prediction: np.ndarray | None  # validation output of the augmented model
     params: dict = field(default_factory=dict)
     measure: str = "simulation"
+    est_sse: float = float("nan")  # noise models: one-step SSE on estimation
 
 
 @dataclass
@@ -293,20 +314,22 @@ def _nested_lr(
     }
 
 
-def _over_noise(noise_c: Candidate, r_est: np.ndarray, r_val: np.ndarray, sig) -> dict:
-    """The deterministic candidate with residuals `r_est`, `r_val` plus the noise
-    model of `noise_c`'s class (fitted on `r_est`), against the nominal model plus
-    the same noise model (`noise_c`): one-step-ahead errors on validation, the
-    batch-means test at $z^\\star$ (module docstring)."""
-    if not (np.all(np.isfinite(r_est)) and np.all(np.isfinite(r_val))):
+def _over_noise(noise_c: Candidate, r_val: np.ndarray, sig) -> dict:
+    """The deterministic candidate's validation residual `r_val` seen through the
+    noise predictor of `noise_c` (fitted on the nominal residual: the same
+    whitening filter on both sides), against the nominal model with it
+    (`noise_c`): one-step-ahead errors on validation, the batch-means test at
+    $z^\\star$ (module docstring, *Derivation of the veto*)."""
+    if not np.all(np.isfinite(r_val)):
         return {"z": -np.inf, "significant": False, "noise": noise_c.effect}
-    value, err = noise_fit_numpy(r_est, r_val)[noise_c.effect]
+    ((name, param),) = noise_c.params.items()
+    err = predictor_errors(name, param["value"], r_val)
     ok, z = sig(noise_c.residual, err, rms(err) ** 2)
     return {
         "z": z,
         "significant": bool(ok),
         "noise": noise_c.effect,
-        "noise_param": value,
+        "noise_param": param["value"],
         "gap_with_noise": rms(err),
         "nominal_gap_with_noise": noise_c.gap_after,
     }
@@ -369,8 +392,7 @@ def attribute(prep: Prepared, fit: dict) -> Attribution:
     r_est = np.asarray(prep.arrays.y_est)[: prep.n_est] - prep.w_est
     noise = noise_fit_numpy(r_est, r_before)
     for effect in NOISE_NAMES:
-        value, err = noise[effect]
-        pname = "ar1_pole" if effect == "coloured_noise" else "level_gain"
+        value, err, pname, est_sse = noise[effect]
         cands[effect] = Candidate(
             effect,
             -1,
@@ -379,6 +401,7 @@ def attribute(prep: Prepared, fit: dict) -> Attribution:
             None,
             params={pname: {"value": value, "std": 0.0}},
             measure="one_step_prediction",
+            est_sse=est_sse,
         )
 
     def sig(r_a, r_b, floor2, z_star=Z_STAR):
@@ -388,8 +411,10 @@ def attribute(prep: Prepared, fit: dict) -> Attribution:
         return ok, z
 
     def noise_test():
-        """The better noise model against the white-noise predictor (recorded)."""
-        c = min((cands[e] for e in NOISE_NAMES), key=lambda c: c.gap_after)
+        """The noise model of the higher likelihood on the estimation record (one
+        parameter each: no penalty between them), against the white-noise
+        predictor on validation (recorded)."""
+        c = min((cands[e] for e in NOISE_NAMES), key=lambda c: c.est_sse)
         ok, z = sig(r_before, c.residual, c.gap_after**2)
         tests["noise_model"] = {"z": z, "significant": ok, "best": c.effect}
         return c, ok
@@ -454,9 +479,7 @@ def attribute(prep: Prepared, fit: dict) -> Attribution:
     if chosen is not None and chosen.measure == "simulation" and shrink < 0.8:
         noise_c, n_sig = noise_test()
         if n_sig and noise_c.gap_after < gap_after:
-            y_est = np.asarray(prep.arrays.y_est)[: prep.n_est]
-            r_est_det = y_est - np.asarray(fit["y_est"][chosen.row])[: prep.n_est]
-            test = _over_noise(noise_c, r_est_det, chosen.residual, sig)
+            test = _over_noise(noise_c, chosen.residual, sig)
             tests["deterministic_over_noise"] = test
             if not test["significant"]:
                 effect, chosen = noise_c.effect, noise_c

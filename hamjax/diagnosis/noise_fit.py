@@ -17,20 +17,30 @@ import jax
 import jax.lax as lax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float
+from jaxtyping import Array, Bool, Float
 
+from .._filters import lfilter_numpy
 from .effects.coloured_noise import ar1_errors, fit_ar1
-from .effects.drift import fit_local_level, local_level_errors
+from .effects.drift import MAX_DRIFT_GAIN, fit_local_level, local_level_errors
 from .layout import bucket
 
 
 class NoiseFit(eqx.Module):
-    """Fitted noise models and their validation one-step-ahead errors."""
+    """Fitted noise models and their validation one-step-ahead errors.
 
-    ar1_pole: Float[Array, ""]
-    ar1_errors: Float[Array, " L"]
+    `drift` is the local level with gain at most `MAX_DRIFT_GAIN` (a white part at
+    least half the innovations, `effects/drift.py`); `coloured_noise` is the AR(1)
+    predictor or the local level of higher gain, whichever has the lower
+    estimation SSE (`coloured_is_level` says which; `coloured_param` is its pole
+    or gain)."""
+
+    coloured_param: Float[Array, ""]
+    coloured_is_level: Bool[Array, ""]
+    coloured_errors: Float[Array, " L"]
+    coloured_sse: Float[Array, ""]  # on the estimation record
     level_alpha: Float[Array, ""]
     level_errors: Float[Array, " L"]
+    level_sse: Float[Array, ""]
 
 
 @eqx.filter_jit
@@ -39,20 +49,30 @@ def fit_noise_models(
     m_est: Float[Array, " L"],
     r_val: Float[Array, " L"],
 ) -> NoiseFit:
-    """AR(1) and local-level predictors fitted on `r_est`, applied to `r_val`."""
+    """The drift and coloured-noise predictors fitted on `r_est`, applied to
+    `r_val`."""
     a = fit_ar1(r_est, m_est)
-    alpha = fit_local_level(r_est, m_est)
+    s_ar1 = jnp.sum(m_est * ar1_errors(r_est, a) ** 2)
+    high = fit_local_level(r_est, m_est, above=MAX_DRIFT_GAIN)
+    s_high = jnp.sum(m_est * local_level_errors(r_est, high) ** 2)
+    is_level = s_high < s_ar1
+    alpha = fit_local_level(r_est, m_est, at_most=MAX_DRIFT_GAIN)
     return NoiseFit(
-        a,
-        ar1_errors(r_val, a),
+        jnp.where(is_level, high, a),
+        is_level,
+        jnp.where(is_level, local_level_errors(r_val, high), ar1_errors(r_val, a)),
+        jnp.minimum(s_high, s_ar1),
         alpha,
         local_level_errors(r_val, alpha),
+        jnp.sum(m_est * local_level_errors(r_est, alpha) ** 2),
     )
 
 
 def noise_fit_numpy(r_est: np.ndarray, r_val: np.ndarray) -> dict:
     """Convenience wrapper on unpadded NumPy residuals (padded to the diagnosis's
-    record buckets, so records of many lengths share a few compilations)."""
+    record buckets, so records of many lengths share a few compilations):
+    `{effect: (parameter value, validation errors, parameter name, estimation
+    SSE)}`."""
     n = bucket(max(r_est.shape[0], r_val.shape[0]))
     pe = np.zeros(n)
     pe[: r_est.shape[0]] = r_est
@@ -62,10 +82,34 @@ def noise_fit_numpy(r_est: np.ndarray, r_val: np.ndarray) -> dict:
     pv[: r_val.shape[0]] = r_val
     f = fit_noise_models(jnp.asarray(pe), jnp.asarray(me), jnp.asarray(pv))
     k = r_val.shape[0]
+    coloured_name = "level_gain" if bool(f.coloured_is_level) else "ar1_pole"
     return {
-        "coloured_noise": (float(f.ar1_pole), np.asarray(f.ar1_errors)[:k]),
-        "drift": (float(f.level_alpha), np.asarray(f.level_errors)[:k]),
+        "coloured_noise": (
+            float(f.coloured_param),
+            np.asarray(f.coloured_errors)[:k],
+            coloured_name,
+            float(f.coloured_sse),
+        ),
+        "drift": (
+            float(f.level_alpha),
+            np.asarray(f.level_errors)[:k],
+            "level_gain",
+            float(f.level_sse),
+        ),
     }
+
+
+def predictor_errors(name: str, value: float, r: np.ndarray) -> np.ndarray:
+    """One-step-ahead errors, on the host, of the fitted noise predictor `name`
+    (`"ar1_pole"` or `"level_gain"`, as `noise_fit_numpy` reports it) with
+    parameter `value` on the residual `r`, from rest: the NumPy twin of
+    `ar1_errors` ($(1 - a q^{-1}) r$) and `local_level_errors`
+    ($\\frac{1 - q^{-1}}{1 - (1 - \\alpha) q^{-1}} r$, with $\\ell_0 = 0$)."""
+    if name == "ar1_pole":
+        return lfilter_numpy(np.array([1.0, -value]), np.array([1.0, 0.0]), r)
+    if name == "level_gain":
+        return lfilter_numpy(np.array([1.0, -1.0]), np.array([1.0, value - 1.0]), r)
+    raise ValueError(f"predictor_errors: unknown noise predictor {name!r}")
 
 
 # The noise models of `fit_noise_family`, in its output order, and how many

@@ -25,7 +25,11 @@ code. Family B (`--family B`, written from physical models) was never used to
 choose them. Expected calibration error (10 bins): 0.010 on those family-A cases,
 **0.148 on family B** (seeds 0 and 1, 14 classes,
 480 cases: mean confidence 0.930 against an accuracy of 0.79). The calibration does not transfer to
-effects off the catalogue: it is overconfident there.
+effects off the catalogue: it is overconfident there. With the drift/coloured
+split by the white share and the one-filter veto (`attribute`, 2026-12-02; the
+constants not refitted, family A's verdicts unchanged): family B seed 0 0.146 ->
+0.119, seed 9 (held out) 0.136 -> 0.067, where most of what is left is the top
+bin (confidence 0.99 against accuracy 0.89-0.93).
 
 **The other classes** share $1 - p_{named}$: `unexplained` takes the fraction of the
 gap the named effect leaves above the noise floor, $1 - \mathrm{shrink}$ (clipped

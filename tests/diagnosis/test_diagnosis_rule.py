@@ -1,8 +1,8 @@
 """The last step of the decision rule (`attribute`): a noise-model effect replaces a
-deterministic explanation that closes < 80 % of the gap only when that explanation,
-with the same noise model on top, does not improve the one-step-ahead predictor
-significantly over the nominal model with that noise model (the veto; fixed keys,
-one batched call)."""
+deterministic explanation that closes < 80 % of the gap only when that explanation's
+residual, seen through the same noise predictor, does not improve the one-step-ahead
+errors significantly over the nominal model's (the veto; fixed keys, one batched
+call)."""
 
 import jax.random as jr
 import numpy as np
@@ -48,7 +48,8 @@ def test_structural_effect_under_coloured_noise_kept_noise_cases_not():
     for d in out[:3]:
         t = d.tests["deterministic_over_noise"]
         assert t["noise"] == "coloured_noise" and t["significant"], t
-        # the AR(1) fitted on the structural candidate's own residual finds the pole
+        # the AR(1) fitted on the nominal residual (the one filter applied to both
+        # sides) finds the pole
         assert np.isclose(t["noise_param"], 0.9, atol=0.1), t
     for d in out[3:5]:
         # a re-fit soaks up part of the ramp: the deterministic gap is significant,

@@ -5,6 +5,18 @@ cannot be simulated on validation data; it is modelled as a local level
 $\\ell_{k+1} = \\ell_k + \\alpha (r_k - \\ell_k)$ tracked on the residual $r$, and
 the gap is the RMS of the one-step-ahead prediction error $r_k - \\ell_k$.
 $\\alpha = 0$ (and $\\ell_0 = 0$) is neutral: the white-noise predictor $\\hat r = 0$.
+
+**Drift keeps a white part.** The contract's drift is a slow trend *plus* the
+white measurement noise $e$; its `coloured_noise` has no white part. For a
+random-walk level seen in white noise of variance $\\sigma_e^2$ the steady-state
+Kalman predictor is the local level above with gain
+$\\alpha = P / (P + \\sigma_e^2)$, $P$ the predicted level variance
+($P^2 = \\sigma_\\eta^2 (P + \\sigma_e^2)$), and its innovation variance is
+$F = P + \\sigma_e^2 = \\sigma_e^2 / (1 - \\alpha)$: $1 - \\alpha$ is the white
+part's share of what the predictor leaves. `drift` is the local level whose white
+part is at least half of it, $\\alpha \\le$ `MAX_DRIFT_GAIN` $= 1/2$; a larger
+gain says the residual is mostly coloured, and that predictor belongs to
+`coloured_noise` (`effects/coloured_noise.py`).
 """
 
 import functools
@@ -38,13 +50,27 @@ def local_level_errors(
     return err
 
 
+MAX_DRIFT_GAIN = 0.5  # module docstring: the white part at least half the innovations
+
+
 def fit_local_level(
-    r: Float[Array, " time"], mask: Float[Array, " time"]
+    r: Float[Array, " time"],
+    mask: Float[Array, " time"],
+    *,
+    above: float | None = None,
+    at_most: float | None = None,
 ) -> Float[Array, ""]:
-    """$\\alpha$ minimising the masked prediction-error energy (grid over $[0, 1]$)."""
+    """$\\alpha$ minimising the masked prediction-error energy on a grid over
+    $[0, 1]$, restricted to $\\alpha >$ `above` and $\\alpha \\le$ `at_most` where
+    given (both are Python floats, fixed at trace time)."""
     alphas = _alphas()
     sse = jax.vmap(lambda a: jnp.sum(mask * local_level_errors(r, a) ** 2))(alphas)
-    return alphas[jnp.argmin(sse)]
+    allowed = jnp.ones(alphas.shape, bool)
+    if above is not None:
+        allowed = allowed & (alphas > above)
+    if at_most is not None:
+        allowed = allowed & (alphas <= at_most)
+    return alphas[jnp.argmin(jnp.where(allowed, sse, jnp.inf))]
 
 
 class DriftEffect(AbstractEffect):

@@ -105,8 +105,8 @@ Decisions, in order:
   without the filter that forecasts what it leaves on validation, and a
   structural effect closing 50-80 % of the gap lost to the noise model.)
 
-  *Why the 0.8 stays.* The veto alone (replacing the 80 % condition, and the
-  lower-gap one, by it) was measured and rejected: one-step prediction by a
+  *Why the 0.8 stays.* The veto alone (in its earlier form; replacing the 80 %
+  condition, and the lower-gap one, by it) was measured and rejected: one-step prediction by a
   local level or an AR(1) of pole near 1 also predicts the slow residual that
   an imperfectly shaped structural fit leaves on the other experiment, which
   its own noise model, fitted on its (near-white) estimation residual, does not

@@ -392,7 +392,7 @@ def attribute(prep: Prepared, fit: dict) -> Attribution:
     r_est = np.asarray(prep.arrays.y_est)[: prep.n_est] - prep.w_est
     noise = noise_fit_numpy(r_est, r_before)
     for effect in NOISE_NAMES:
-        value, err, pname, est_sse = noise[effect]
+        value, err, pname, est_sse = noise[effect]  # a NoisePredictor
         cands[effect] = Candidate(
             effect,
             -1,

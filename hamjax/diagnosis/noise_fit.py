@@ -11,6 +11,7 @@ innovations on both records.
 import functools as ft
 import threading
 from collections.abc import Iterable
+from typing import NamedTuple
 
 import equinox as eqx
 import jax
@@ -21,18 +22,22 @@ from jaxtyping import Array, Bool, Float
 
 from .._filters import lfilter_numpy
 from .effects.coloured_noise import ar1_errors, fit_ar1
-from .effects.drift import MAX_DRIFT_GAIN, fit_local_level, local_level_errors
+from .effects.drift import (
+    fit_local_level,
+    fit_split_local_level,
+    local_level_errors,
+)
 from .layout import bucket
 
 
 class NoiseFit(eqx.Module):
     """Fitted noise models and their validation one-step-ahead errors.
 
-    `drift` is the local level with gain at most `MAX_DRIFT_GAIN` (a white part at
-    least half the innovations, `effects/drift.py`); `coloured_noise` is the AR(1)
-    predictor or the local level of higher gain, whichever has the lower
-    estimation SSE (`coloured_is_level` says which; `coloured_param` is its pole
-    or gain)."""
+    `drift` is the local level with gain at most `effects.drift.MAX_DRIFT_GAIN`
+    (a white part at least half the innovations, `effects/drift.py`);
+    `coloured_noise` is the AR(1) predictor or the local level of higher gain,
+    whichever has the lower estimation SSE (`coloured_is_level` says which;
+    `coloured_param` is its pole or gain)."""
 
     coloured_param: Float[Array, ""]
     coloured_is_level: Bool[Array, ""]
@@ -53,10 +58,8 @@ def fit_noise_models(
     `r_val`."""
     a = fit_ar1(r_est, m_est)
     s_ar1 = jnp.sum(m_est * ar1_errors(r_est, a) ** 2)
-    high = fit_local_level(r_est, m_est, above=MAX_DRIFT_GAIN)
-    s_high = jnp.sum(m_est * local_level_errors(r_est, high) ** 2)
+    alpha, s_drift, high, s_high = fit_split_local_level(r_est, m_est)
     is_level = s_high < s_ar1
-    alpha = fit_local_level(r_est, m_est, at_most=MAX_DRIFT_GAIN)
     return NoiseFit(
         jnp.where(is_level, high, a),
         is_level,
@@ -64,15 +67,23 @@ def fit_noise_models(
         jnp.minimum(s_high, s_ar1),
         alpha,
         local_level_errors(r_val, alpha),
-        jnp.sum(m_est * local_level_errors(r_est, alpha) ** 2),
+        s_drift,
     )
+
+
+class NoisePredictor(NamedTuple):
+    """One fitted noise-model effect, as `noise_fit_numpy` returns it."""
+
+    value: float  # its parameter
+    errors: np.ndarray  # validation one-step-ahead errors
+    name: str  # the parameter's name: "ar1_pole" or "level_gain"
+    est_sse: float  # one-step SSE on the estimation record
 
 
 def noise_fit_numpy(r_est: np.ndarray, r_val: np.ndarray) -> dict:
     """Convenience wrapper on unpadded NumPy residuals (padded to the diagnosis's
     record buckets, so records of many lengths share a few compilations):
-    `{effect: (parameter value, validation errors, parameter name, estimation
-    SSE)}`."""
+    `{effect: NoisePredictor}`."""
     n = bucket(max(r_est.shape[0], r_val.shape[0]))
     pe = np.zeros(n)
     pe[: r_est.shape[0]] = r_est
@@ -84,13 +95,13 @@ def noise_fit_numpy(r_est: np.ndarray, r_val: np.ndarray) -> dict:
     k = r_val.shape[0]
     coloured_name = "level_gain" if bool(f.coloured_is_level) else "ar1_pole"
     return {
-        "coloured_noise": (
+        "coloured_noise": NoisePredictor(
             float(f.coloured_param),
             np.asarray(f.coloured_errors)[:k],
             coloured_name,
             float(f.coloured_sse),
         ),
-        "drift": (
+        "drift": NoisePredictor(
             float(f.level_alpha),
             np.asarray(f.level_errors)[:k],
             "level_gain",

@@ -53,24 +53,30 @@ def local_level_errors(
 MAX_DRIFT_GAIN = 0.5  # module docstring: the white part at least half the innovations
 
 
+def _level_sse(r: Float[Array, " time"], mask: Float[Array, " time"]) -> Array:
+    """The masked prediction-error energy at each gain of the grid."""
+    return jax.vmap(lambda a: jnp.sum(mask * local_level_errors(r, a) ** 2))(_alphas())
+
+
 def fit_local_level(
-    r: Float[Array, " time"],
-    mask: Float[Array, " time"],
-    *,
-    above: float | None = None,
-    at_most: float | None = None,
+    r: Float[Array, " time"], mask: Float[Array, " time"]
 ) -> Float[Array, ""]:
-    """$\\alpha$ minimising the masked prediction-error energy on a grid over
-    $[0, 1]$, restricted to $\\alpha >$ `above` and $\\alpha \\le$ `at_most` where
-    given (both are Python floats, fixed at trace time)."""
-    alphas = _alphas()
-    sse = jax.vmap(lambda a: jnp.sum(mask * local_level_errors(r, a) ** 2))(alphas)
-    allowed = jnp.ones(alphas.shape, bool)
-    if above is not None:
-        allowed = allowed & (alphas > above)
-    if at_most is not None:
-        allowed = allowed & (alphas <= at_most)
-    return alphas[jnp.argmin(jnp.where(allowed, sse, jnp.inf))]
+    """$\\alpha$ minimising the masked prediction-error energy (grid over $[0, 1]$)."""
+    return _alphas()[jnp.argmin(_level_sse(r, mask))]
+
+
+def fit_split_local_level(
+    r: Float[Array, " time"], mask: Float[Array, " time"]
+) -> tuple[Array, Array, Array, Array]:
+    """From one pass over the grid: the drift gain ($\\alpha \\le$
+    `MAX_DRIFT_GAIN`) and the gain of the level above it (a `coloured_noise`
+    predictor), each with its masked prediction-error energy:
+    `(drift_alpha, drift_sse, high_alpha, high_sse)`."""
+    alphas, sse = _alphas(), _level_sse(r, mask)
+    low = alphas <= MAX_DRIFT_GAIN
+    i = jnp.argmin(jnp.where(low, sse, jnp.inf))
+    j = jnp.argmin(jnp.where(low, jnp.inf, sse))
+    return alphas[i], sse[i], alphas[j], sse[j]
 
 
 class DriftEffect(AbstractEffect):

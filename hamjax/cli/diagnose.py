@@ -286,6 +286,10 @@ def run(args: argparse.Namespace) -> int:
     return 2 if totals[:, 1].any() else 0
 
 
+# the report's line for a case without model.json (and the flag `diagnose_many` gets)
+FITTED = "fitted by hamjax on the estimation record (nominal_model.json)"
+
+
 def _diagnose(args, cases: list, outs, blocks, quiet, verbose) -> int:
     """Diagnose the cases read (`(index, case, out)`), one `diagnose_many` call per
     block of `blocks` (`share`) padded as the whole run (`padding`), writing each
@@ -301,7 +305,7 @@ def _diagnose(args, cases: list, outs, blocks, quiet, verbose) -> int:
         if plant is None:
             plant = fit_nominal(case.dt, case.estimation)
             write_json(out / "nominal_model.json", model_to_dict(plant, case.dt))
-            source = "fitted by hamjax on the estimation record (nominal_model.json)"
+            source = FITTED
         else:
             source = f"given ({case.folder / 'model.json'})"
         item[i] = (plant, case.dt, case.estimation, case.validation)
@@ -357,6 +361,7 @@ def _call(
     try:
         diagnose_many(
             [item[i] for i in members],
+            fitted=[where[i][3] == FITTED for i in members],
             on_result=write,
             rule=args.rule,
             padding=pad,

@@ -27,7 +27,7 @@ def run(key, out: Path) -> list[tuple[str, str]]:
     est, val = gap_records(est, val)  # as `hamjax study real-data-gap` writes it
     dt = float(est["t"][1] - est["t"][0])
     plant = fit_nominal(dt, est)
-    d = diagnose_gap(plant, dt, est, val)
+    d = diagnose_gap(plant, dt, est, val, fitted=True)
     folder = Path(out) / "real_data"
     name = "cascaded tanks (real measurements)"
     write_diagnosis(

@@ -297,13 +297,21 @@ def _nested_lr(
     $\\hat\\sigma^2 = S_{effect} / (n - p)$ is $\\chi^2_k$ under white Gaussian noise
     when the effect is absent ($k \\le 2$ effect parameters); the threshold is the
     $\\chi^2_2$ quantile at $\\alpha / m$ for the $m$ classes validation chose
-    from, $2 \\ln(m / \\alpha)$, which bounds the $\\chi^2_1$ one too. Because the
-    test trusts the noise to be white and the re-fit to be at its optimum, the
-    candidate must also improve on the re-fit on validation with $z > 2$."""
+    from, $2 \\ln(m / \\alpha)$, which bounds the $\\chi^2_1$ one too; a row with
+    $k > 2$ more parameters than the re-fit (a `REFIT_LINEAR` row, which re-fits
+    the numerator as well) gets its own $\\chi^2_k$ quantile at $\\alpha / m$.
+    Because the test trusts the noise to be white and the re-fit to be at its
+    optimum, the candidate must also improve on the re-fit on validation with
+    $z > 2$."""
     p = n_fitted(prep, best.row)
     s2 = sse[best.row] / max(prep.n_est - p, 1)
     lr = float((sse[pm.row] - sse[best.row]) / s2) if s2 > 0 else 0.0
     threshold = 2.0 * np.log(m / LR_ALPHA)
+    k = p - n_fitted(prep, pm.row)
+    if k > 2:
+        from scipy.stats import chi2
+
+        threshold = max(threshold, float(chi2.isf(LR_ALPHA / m, k)))
     z = improvement_z(pm.residual, best.residual)
     return {
         "lr": lr if np.isfinite(lr) else 0.0,

@@ -97,8 +97,24 @@ def effect_scales(ctx: StartContext) -> dict[str, float]:
 
 
 def slot_names(n_max: int) -> tuple[str, ...]:
-    """Names of the full parameter vector: nominal, effects, then `den1..den{n_max}`."""
-    return NOMINAL_SLOTS + EFFECT_SLOTS + tuple(f"den{i}" for i in range(1, n_max + 1))
+    """Names of the full parameter vector: nominal, effects, `den1..den{n_max}`,
+    then `db0..db{n_max}` (changes of a discrete numerator, `REFIT_LINEAR`)."""
+    return (
+        NOMINAL_SLOTS
+        + EFFECT_SLOTS
+        + tuple(f"den{i}" for i in range(1, n_max + 1))
+        + numerator_slots(n_max)
+    )
+
+
+def numerator_slots(n_max: int) -> tuple[str, ...]:
+    """`db0..db{n_max}`: added to the nominal's discrete numerator (neutral 0)."""
+    return tuple(f"db{i}" for i in range(n_max + 1))
+
+
+def n_max_of(n_slots: int) -> int:
+    """The linear block's padded order from the length of the parameter vector."""
+    return (n_slots - len(NOMINAL_SLOTS) - len(EFFECT_SLOTS) - 1) // 2
 
 
 def slot_index(name: str, n_max: int) -> int:
@@ -153,7 +169,7 @@ def full_parameters(
     n_slots = case.anchor.shape[0]
     moved = jnp.zeros(n_slots, theta.dtype).at[row.idx].add(theta, mode="drop")
     raw = case.anchor + case.scale * moved
-    n_max = n_slots - len(NOMINAL_SLOTS) - len(EFFECT_SLOTS)
+    n_max = n_max_of(n_slots)
     is_abs = np.isin(np.array(slot_names(n_max)), _ABS_SLOTS)
     is_unit = np.isin(np.array(slot_names(n_max)), _UNIT_SLOTS)
     phys = jnp.where(is_abs, jnp.abs(raw), raw)
@@ -163,14 +179,17 @@ def full_parameters(
 
 
 def linear_polynomials(p: Float[Array, " S"], case: CaseArrays) -> tuple[Array, Array]:
-    """Discrete `(b, a)` in $q^{-1}$ of the re-fitted linear block, length `n_max + 1`.
+    """Discrete `(b, a)` in $q^{-1}$ of the re-fitted linear block, length `n_max + 1`
+    (a discrete numerator is $g\\,(b_{nominal} + \\delta b)$, `db0..`).
 
     A continuous block is discretised exactly (zero-order hold, matrix exponential)
     and converted to its transfer function by Faddeev-LeVerrier.
     """
     n_max = case.b_disc.shape[0] - 1
     g = p[NOMINAL_SLOTS.index("gain")]
-    den = p[-n_max:]
+    first_den = len(NOMINAL_SLOTS) + len(EFFECT_SLOTS)
+    den = p[first_den : first_den + n_max]
+    db = p[first_den + n_max :]
     a_disc = jnp.concatenate([jnp.ones(1), den])
     den_ct = jnp.convolve(jnp.concatenate([case.den_lead[None], den]), case.ct_pad)
     den_ct = den_ct[-(n_max + 1) :]
@@ -180,7 +199,8 @@ def linear_polynomials(p: Float[Array, " S"], case: CaseArrays) -> tuple[Array, 
     cmb = jnp.einsum("i,kij,j->k", Cc[0], Ms, Bd[:, 0])
     b_ct = jnp.concatenate([Dc[0], cmb + Dc[0, 0] * c[1:]])
     ct = case.is_ct > 0.5
-    return jnp.where(ct, b_ct, g * case.b_disc), jnp.where(ct, c, a_disc)
+    # `db` moves a discrete numerator only (a continuous block never frees it)
+    return jnp.where(ct, b_ct, g * (case.b_disc + db)), jnp.where(ct, c, a_disc)
 
 
 def switch(flag: bool | Bool[Array, ""], on: Callable, off: Callable, *args):
@@ -501,7 +521,7 @@ def uses_memory(
 ) -> Bool[Array, "*batch"]:
     """Whether rows with these free slots, of cases of map kind `nl_kind`, need the
     input-memory scan (every row of a backlash nominal does)."""
-    n_max = free.shape[-1] - len(NOMINAL_SLOTS) - len(EFFECT_SLOTS)
+    n_max = n_max_of(free.shape[-1])
     cols = [slot_index(name, n_max) for name in MEMORY_SLOTS]
     return free[..., cols].any(axis=-1) | (nl_kind == NL_BACKLASH)
 
@@ -516,7 +536,7 @@ FEEDBACK_SLOTS = FrictionEffect.slots + FeedbackNonlinearityEffect.slots
 
 def uses_feedback(free: Bool[Array, "*batch S"]) -> Bool[Array, "*batch"]:
     """Whether rows with these free slots need the feedback loop (`feedback_scan`)."""
-    n_max = free.shape[-1] - len(NOMINAL_SLOTS) - len(EFFECT_SLOTS)
+    n_max = n_max_of(free.shape[-1])
     cols = [slot_index(name, n_max) for name in FEEDBACK_SLOTS]
     return free[..., cols].any(axis=-1)
 

@@ -3,7 +3,7 @@ shrinks once that effect is added (the contract `../shared/contracts/gap-case.md
 
 import functools as ft
 from collections import defaultdict
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 
 import equinox as eqx
@@ -113,7 +113,8 @@ def _fitted_n_params() -> int:
     of max `INTEGRATING_ORDERS` + 1)."""
     n = max(max(ORDERS), max(INTEGRATING_ORDERS) + 1)
     lin = DiscreteTransferFunction(np.ones(n + 1), np.r_[1.0, np.zeros(n)], 1.0)
-    return n_free_parameters(Hammerstein(PiecewiseLinear(k1=1.0, k2=1.0), lin))
+    plant = Hammerstein(PiecewiseLinear(k1=1.0, k2=1.0), lin)
+    return n_free_parameters(plant, fitted=True)
 
 
 def run_padding(cases: Iterable[tuple[Hammerstein | None, int]]) -> Padding:
@@ -240,6 +241,7 @@ def diagnose_many(
     nominal_uncertainty: float | None = NOMINAL_UNCERTAINTY,
     rule: str = DEFAULT_RULE,
     padding: Padding | None = None,
+    fitted: Sequence[bool] | None = None,
 ) -> list[GapDiagnosis]:
     """Diagnose several cases: `(plant, dt, estimation, validation)` each, the records
     being `{"t", "v", "y"}` dicts of NumPy arrays.
@@ -256,7 +258,9 @@ def diagnose_many(
     called as soon as case `i` is done, so a caller can write each result while the
     others are still being fitted. `padding`: that of a whole run (`run_padding`
     of all its cases), for a call of one block of it (`run_blocks`); None:
-    `run_padding(items)`.
+    `run_padding(items)`. `fitted[i]`: case `i`'s nominal is hamjax's own fit
+    (`nominal_fit.fit_nominal`, no model.json; `layout.prepare(fitted_nominal=)`);
+    None: no case's.
 
     **Raises:** `DiagnosisNotFinite` (its `index` the case) if a case's gaps, noise
     floor or simulated outputs are NaN or inf.
@@ -276,7 +280,14 @@ def diagnose_many(
     # Cases alike in a batch (`fit._fit_flat`): by map kind, then by length.
     for i in sorted(range(len(items)), key=lambda i: (kinds[i], lengths[i])):
         groups[_group(lengths[i])].append(i)
-    own = run_padding((plant, n) for (plant, *_), n in zip(items, lengths, strict=True))
+    fitted = [False] * len(items) if fitted is None else [bool(f) for f in fitted]
+    if len(fitted) != len(items):
+        raise ValueError(f"{len(fitted)} `fitted` flags for {len(items)} cases")
+    # a fitted nominal counts as the widest fit (as a case without model.json does)
+    own = run_padding(
+        (None if f else plant, n)
+        for (plant, *_), n, f in zip(items, lengths, fitted, strict=True)
+    )
     padding = padding or own
     n_params, padded = padding.n_params, dict(padding.lengths)
     if n_params < own.n_params or any(padded.get(g, 0) < n for g, n in own.lengths):
@@ -292,6 +303,7 @@ def diagnose_many(
                 length,
                 n_params,
                 nominal_uncertainty=nominal_uncertainty,
+                fitted_nominal=fitted[i],
             )
             for i in members
         ]
@@ -317,6 +329,7 @@ def diagnose_gap(
     *,
     nominal_uncertainty: float | None = NOMINAL_UNCERTAINTY,
     rule: str = DEFAULT_RULE,
+    fitted: bool = False,
 ) -> GapDiagnosis:
     """Diagnose the gap between `plant` (the nominal model) and two records.
 
@@ -331,6 +344,7 @@ def diagnose_gap(
     - `nominal_uncertainty`: relative std of the nominal parameters (the prior of
       every re-fit; default 0.2).
     - `rule`: the decision rule, "cascade" (default) or "likelihood" (`RULES`).
+    - `fitted`: `plant` is `nominal_fit.fit_nominal`'s (the case has no model.json).
 
     **Returns:** a `GapDiagnosis` (the contract's fields and the figure data).
     """
@@ -338,4 +352,5 @@ def diagnose_gap(
         [(plant, dt, estimation, validation)],
         nominal_uncertainty=nominal_uncertainty,
         rule=rule,
+        fitted=[fitted],
     )[0]

@@ -68,10 +68,13 @@ class RowFit(eqx.Module):
 
 
 def nominal_mask(row: Row, case: CaseArrays) -> Bool[Array, " P"]:
-    """Which entries of `theta` move the nominal model's own parameters."""
+    """Which entries of `theta` move the nominal model's own parameters (the
+    numerator changes `db..` of a `REFIT_LINEAR` row do not: that row re-fits a
+    numerator the nominal's own linear fit could not determine)."""
     first_den = len(NOMINAL_SLOTS) + len(EFFECT_SLOTS)
+    n_max = case.b_disc.shape[0] - 1
     return (row.idx < len(NOMINAL_SLOTS)) | (
-        (row.idx >= first_den) & (row.idx < case.anchor.shape[0])
+        (row.idx >= first_den) & (row.idx < first_den + n_max)
     )
 
 

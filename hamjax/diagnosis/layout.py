@@ -33,6 +33,7 @@ from .augmented import (
     CaseArrays,
     Row,
     effect_scales,
+    numerator_slots,
     raw_from_physical,
     slot_names,
 )
@@ -50,7 +51,7 @@ from .effects import (
     StartContext,
     TimeDelayEffect,
 )
-from .effects._base import FLIP_SIGN, output_half_range, scale_span
+from .effects._base import FLIP_SIGN, REFIT_LINEAR, output_half_range, scale_span
 from .effects.backlash import slide_init, slide_step, stick_slip_step
 from .effects.time_delay import delay_range, delay_shortlist, dominant_time_constant
 from .residuals import feedback_test, noise_std_differences
@@ -73,6 +74,10 @@ BUCKETS = (256, 512, 1024, 1536, 2048, 3072, 4096, 6144, 8192, 12288, 16384)
 N_MAX = 4
 T_MAX = 64
 MAX_EFFECT_SLOTS = 2  # most slots any one candidate row frees
+# the highest order of the linear block `nominal_fit` selects, which a
+# `REFIT_LINEAR` row re-fits whatever order was selected (the selection assumed
+# a linear output map too)
+FITTED_ORDER = 3
 QUANTILES = (0.02, 0.05, 0.1, 0.2, 0.3, 0.5, 0.7, 0.8, 0.9, 0.95, 0.98)
 # One unit of a scaled nominal parameter moves it by this fraction of its
 # magnitude (slopes, gain, scales, denominator coefficients) or by half of it times
@@ -385,11 +390,15 @@ def prepare(
     n_params: int | None = None,
     *,
     nominal_uncertainty: float | None = None,
+    fitted_nominal: bool = False,
 ) -> Prepared:
     """Case arrays and candidate rows for `plant` and the two records (`t,v,y` dicts).
 
     `nominal_uncertainty`: the relative std of the nominal parameters, the prior
-    of every re-fit (`prior_weight`); None for a negligible prior."""
+    of every re-fit (`prior_weight`); None for a negligible prior.
+    `fitted_nominal`: `plant` is hamjax's own fit (`nominal_fit`, no model.json),
+    so starts that re-fit its whole discrete linear block are offered
+    (`REFIT_LINEAR`; `n_free_parameters(..., fitted=True)` wide)."""
     plant = fold_output_scale(plant)
     nom = describe_nominal(plant)
     n_est, n_val = est["v"].shape[0], val["v"].shape[0]
@@ -425,6 +434,7 @@ def prepare(
         if _looks_closed_loop(np.asarray(est["y"]), np.asarray(v))
         else (),
         t_dom=float(t_dom),
+        refit_linear=bool(fitted_nominal and not nom.is_ct),
     )
     b_disc, ct_num, ct_pad, den_slots, den_lead, den_free = _linear_templates(nom, dt)
     names = slot_names(N_MAX)
@@ -449,6 +459,9 @@ def prepare(
         i = len(NOMINAL_SLOTS) + len(EFFECT_SLOTS) + j
         anchor[i] = neutral[i] = den_slots[j]
         scale[i] = RELATIVE_STEP * max(abs(den_slots[j]), den_scale)
+    db_scale = RELATIVE_STEP * max(np.abs(b_disc).max(), 1e-12)
+    for name in numerator_slots(N_MAX):
+        scale[names.index(name)] = db_scale  # anchor and neutral 0: b as nominal
     w_half = output_half_range(ctx)
     w_centre = 0.0  # bend about w = 0 (a sensor's zero): a pure quadratic stays exact
     effect_scale = effect_scales(ctx)
@@ -467,7 +480,13 @@ def prepare(
         # its output scale) scaled, so re-fitting both leaves an exact ridge along
         # which the fit wanders and Levenberg-Marquardt crawls.
         refit = ["gain", *refit]
-    P = n_params or len(refit) + MAX_EFFECT_SLOTS
+    # a `REFIT_LINEAR` start: numerator and denominator of the highest fitted
+    # order, the gain (which the numerator carries) and the map held at nominal
+    n_lin = max(FITTED_ORDER, len(den_free), nom.b.shape[0] - 1)
+    refit_linear = [f"den{j + 1}" for j in range(n_lin)] + list(
+        numerator_slots(N_MAX)[: n_lin + 1]
+    )
+    P = n_params or n_free_parameters(plant, fitted=ctx.refit_linear)
     # the re-fitted parameters that carry the sign of G F (`FLIP_SIGN`)
     sign_slots = {
         NL_PIECEWISE: ("k1", "k2", "l1", "l2"),
@@ -488,13 +507,20 @@ def prepare(
             )
             # a start's gain (the stick-slip profile's) only where the gain is
             # re-fitted (identity maps; elsewhere the map's slopes carry it)
+            base = refit_linear if REFIT_LINEAR in start else refit
             start = {
                 n: x
                 for n, x in start.items()
-                if n != FLIP_SIGN and (n != "gain" or "gain" in refit)
+                if n not in (FLIP_SIGN, REFIT_LINEAR)
+                and (n != "gain" or "gain" in base)
             }
             for tau in taus:
-                free_names = refit + [n for n in start if n not in refit]
+                free_names = base + [n for n in start if n not in base]
+                if len(free_names) > P:
+                    raise ValueError(
+                        f"a {effect.name} row frees {len(free_names)} parameters, "
+                        f"more than the padding's {P} (n_free_parameters)"
+                    )
                 idx = np.full(P, S)
                 idx[: len(free_names)] = [names.index(n) for n in free_names]
                 theta0 = np.zeros(P)
@@ -610,12 +636,24 @@ def best_row_per_class(
     return best
 
 
-def n_free_parameters(plant: Hammerstein) -> int:
-    """Width of the compact parameter vector this plant's rows need."""
+def refits_linear(row: Row) -> bool:
+    """Whether `row` re-fits the numerator too (a `REFIT_LINEAR` start)."""
+    names = slot_names(N_MAX)
+    return any(row.free[names.index(n)] for n in numerator_slots(N_MAX))
+
+
+def n_free_parameters(plant: Hammerstein, *, fitted: bool = False) -> int:
+    """Width of the compact parameter vector this plant's rows need; `fitted`:
+    the plant is hamjax's own discrete fit, whose `REFIT_LINEAR` row frees the
+    denominator, the numerator and `MAX_EFFECT_SLOTS` effect slots."""
     nom = describe_nominal(plant)
     n_den = nom.order if nom.is_ct else nom.den.shape[0] - 1
     nl = {NL_PIECEWISE: 6, NL_TABULATED: 2, NL_BACKLASH: 2}.get(nom.nl_kind, 1)
-    return n_den + nl + MAX_EFFECT_SLOTS
+    width = n_den + nl + MAX_EFFECT_SLOTS
+    if fitted and not nom.is_ct:
+        n_lin = max(FITTED_ORDER, n_den, nom.b.shape[0] - 1)
+        width = max(width, 2 * n_lin + 1 + MAX_EFFECT_SLOTS)
+    return width
 
 
 def _response_numpy(linear, u: np.ndarray, dt: float) -> np.ndarray:

@@ -28,6 +28,7 @@ from ..models import DiscreteTransferFunction, Hammerstein, Identity, PiecewiseL
 from .augmented import slot_names
 from .fit import fit_rows
 from .layout import (
+    FITTED_ORDER,
     MAX_EFFECT_SLOTS,
     N_MAX,
     nominal_output,
@@ -35,7 +36,7 @@ from .layout import (
 )
 
 
-ORDERS = (1, 2, 3)
+ORDERS = tuple(range(1, FITTED_ORDER + 1))
 # orders of the stable part of an integrating structure B/(A (1 - q^-1)): level
 # loops and position axes (the whole block stays within the diagnosis's N_MAX)
 INTEGRATING_ORDERS = (1, 2)

@@ -31,7 +31,14 @@ from .._results import RESULTS
 from ..simulation.sharding import effective_chunk
 from .augmented import Row, uses_feedback, uses_memory, uses_table
 from .fit import LAMBDA0, RowFit, fit_batch, theta_std
-from .layout import Prepared, best_row_per_class, finite_sse, validation_sse
+from .layout import (
+    Prepared,
+    best_row_per_class,
+    finite_sse,
+    refits_linear,
+    validation_sse,
+)
+from .nominal_fit import NOMINAL_STEPS
 
 
 REFIT = "parameter_mismatch"
@@ -87,15 +94,24 @@ def finishing_items(c: int, prep: Prepared, fits: dict) -> list[Item]:
       effect lets another effect win. Classes further down were measured not to
       change the decision on the development benchmark, and continuing every
       class doubled the cost.
+    - A row that re-fits the whole linear block (`layout.refits_linear`, only
+      beside hamjax's own nominal), continued to the budget of the nominal fit,
+      which fits the same block (`nominal_fit.NOMINAL_STEPS`), whatever its
+      class's rank: it starts at the linear fit's numerator, far from its own
+      optimum, so a few screening steps cannot rank it.
     """
     sse = finite_sse(fits)
     best = best_row_per_class(prep, sse, validation_sse(prep, fits))
     i_pm = best.pop(REFIT)
     lead = sorted(best.values(), key=lambda k: sse[k])[:CONTINUE_CLASSES]
     used = np.asarray(prep.rows[i_pm][1].idx) < prep.arrays.anchor.shape[0]
+    budget = lambda k: (  # noqa: E731
+        NOMINAL_STEPS - SCREEN_STEPS if refits_linear(prep.rows[k][1]) else FINISH_STEPS
+    )
+    linear = [k for k, (_, r) in enumerate(prep.rows) if refits_linear(r)]
     out = [
-        Item(c, k, fits["theta"][k], LAMBDA0, FINISH_STEPS, "finish", "stopped")
-        for k in [i_pm, *lead]
+        Item(c, k, fits["theta"][k], LAMBDA0, budget(k), "finish", "stopped")
+        for k in dict.fromkeys([i_pm, *lead, *linear])
         if fits["result"][k] != SUCCESSFUL
     ]
     restart = np.where(used, fits["theta"][lead[0]], 0.0)  # nominal part only

@@ -31,6 +31,9 @@ class StartContext(eqx.Module):
     # the nominal linear block's slowest time constant in samples
     # (`time_delay.dominant_time_constant`; inf when not stable, 0 without a pole)
     t_dom: float = float("inf")
+    # the nominal is hamjax's own linear fit (`nominal_fit`, no model.json) with a
+    # discrete block: a start may then re-fit its whole linear block (`REFIT_LINEAR`)
+    refit_linear: bool = False
 
 
 class AbstractEffect(eqx.Module):
@@ -49,7 +52,10 @@ class AbstractEffect(eqx.Module):
       `{slot: value}` dict in physical units; the key `FLIP_SIGN` (not a slot)
       starts the re-fitted nominal model with its output negated (the sign of
       $G F$ flipped: the gain, the slopes and levels of a piecewise-linear map, or
-      a table's output scale), for an effect that hides the sign.
+      a table's output scale), for an effect that hides the sign; the key
+      `REFIT_LINEAR` (not a slot; offered only where `ctx.refit_linear`) re-fits
+      the whole discrete linear block, numerator included (`db0..`), with the
+      static gain and map held at nominal.
     """
 
     name: ClassVar[str]
@@ -71,6 +77,8 @@ class AbstractEffect(eqx.Module):
 
 
 FLIP_SIGN = "flip_sign"  # a start key: the nominal re-fit starts with -G F
+# a start key: the row re-fits numerator and denominator of the nominal's own fit
+REFIT_LINEAR = "refit_linear"
 
 UNIT_MAX = 0.995  # a unit-interval slot is 0.995 * sigmoid(raw): inside [0, 1), smooth
 

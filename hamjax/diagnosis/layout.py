@@ -78,6 +78,10 @@ MAX_EFFECT_SLOTS = 2  # most slots any one candidate row frees
 # `REFIT_LINEAR` row re-fits whatever order was selected (the selection assumed
 # a linear output map too)
 FITTED_ORDER = 3
+# the row (not a class) that re-fits the linear block as a `REFIT_LINEAR` row
+# does, with the effect held neutral (its `level` slots free): the reference a
+# `REFIT_LINEAR` row must beat to stand for its class (`best_row_per_class`)
+LINEAR_TWIN = "linear_twin"
 QUANTILES = (0.02, 0.05, 0.1, 0.2, 0.3, 0.5, 0.7, 0.8, 0.9, 0.95, 0.98)
 # One unit of a scaled nominal parameter moves it by this fraction of its
 # magnitude (slopes, gain, scales, denominator coefficients) or by half of it times
@@ -496,10 +500,41 @@ def prepare(
     taus_tried = delay_shortlist(
         est["y"], w_est, max_delay=delay_range(t_dom, n_est), t_dom=t_dom
     )
+
+    def _row(name, base, start, flip, tau):
+        free_names = base + [n for n in start if n not in base]
+        if len(free_names) > P:
+            raise ValueError(
+                f"a {name} row frees {len(free_names)} parameters, "
+                f"more than the padding's {P} (n_free_parameters)"
+            )
+        idx = np.full(P, S)
+        idx[: len(free_names)] = [names.index(n) for n in free_names]
+        theta0 = np.zeros(P)
+        for j, n in enumerate(free_names):
+            if n in start or n in flip:
+                raw = raw_from_physical(n, {**flip, **start}[n])
+                theta0[j] = (raw - anchor[names.index(n)]) / scale[names.index(n)]
+        free = np.isin(np.array(names), free_names)
+        row = Row(
+            idx=np.asarray(idx),
+            theta0=np.asarray(theta0),
+            tau=np.asarray(tau),
+            free=np.asarray(free),
+        )
+        return name, row
+
     rows = []
+    twins = []
     for effect in DETERMINISTIC:
         taus = taus_tried if effect.name == "time_delay" else (0,)
-        for start in effect.starts(ctx):
+        starts = effect.starts(ctx)
+        for start in starts:
+            if REFIT_LINEAR in start:
+                twin = {n: EFFECT_NEUTRAL[n] for n in start if n in effect.level}
+                if twin not in twins:
+                    twins.append(twin)
+        for start in starts:
             flip = (
                 {n: -nominal_values[n] for n in sign_slots}
                 if FLIP_SIGN in start
@@ -515,33 +550,9 @@ def prepare(
                 and (n != "gain" or "gain" in base)
             }
             for tau in taus:
-                free_names = base + [n for n in start if n not in base]
-                if len(free_names) > P:
-                    raise ValueError(
-                        f"a {effect.name} row frees {len(free_names)} parameters, "
-                        f"more than the padding's {P} (n_free_parameters)"
-                    )
-                idx = np.full(P, S)
-                idx[: len(free_names)] = [names.index(n) for n in free_names]
-                theta0 = np.zeros(P)
-                for j, n in enumerate(free_names):
-                    if n in start or n in flip:
-                        raw = raw_from_physical(n, {**flip, **start}[n])
-                        theta0[j] = (raw - anchor[names.index(n)]) / scale[
-                            names.index(n)
-                        ]
-                free = np.isin(np.array(names), free_names)
-                rows.append(
-                    (
-                        effect.name,
-                        Row(
-                            idx=np.asarray(idx),
-                            theta0=np.asarray(theta0),
-                            tau=np.asarray(tau),
-                            free=np.asarray(free),
-                        ),
-                    )
-                )
+                rows.append(_row(effect.name, base, start, flip, tau))
+    for twin in twins:
+        rows.append(_row(LINEAR_TWIN, refit_linear, twin, {}, 0))
     tab_v, tab_u, tab_d = _pad_table(nom.tab_v, nom.tab_u, nom.tab_d)
     v_est, m_est = _pad_record(est["v"], L)
     y_est, _ = _pad_record(est["y"], L)
@@ -612,26 +623,46 @@ def best_row_per_class(
     2 \\ln(1 / \\alpha)$ ($\\chi^2_1$ under white noise; the bound of
     `attribute._nested_lr` for one comparison), confirmed by a lower validation
     SSE (`val_sse`; the ratio trusts white noise): the extra slot must earn its
-    place, as the effect must over the re-fit."""
+    place, as the effect must over the re-fit.
+
+    A `REFIT_LINEAR` row (beside hamjax's own nominal) re-fits the whole linear
+    block as well, so what it gains over the nominal may be the linear block's
+    alone (a closed loop's dynamics, an order the selection missed). It stands
+    for its class only if it first beats its `LINEAR_TWIN` (the same linear
+    re-fit with the effect held neutral) by the same nested ratio, the twin's
+    row nesting it with the effect's own parameters the difference, confirmed
+    on validation. The twin stands for no class."""
     names = slot_names(N_MAX)
     extension = {e.name: [names.index(s) for s in e.extension] for e in DETERMINISTIC}
     best: dict[str, int] = {}
     best_ext: dict[str, int] = {}
+    threshold = 2.0 * np.log(1.0 / LR_ALPHA)
+    twin = [k for k, (name, _) in enumerate(prep.rows) if name == LINEAR_TWIN]
+
+    def beats(k: int, k0: int) -> bool:
+        p = n_fitted(prep, k)
+        s2 = sse[k] / max(prep.n_est - p, 1)
+        gain = sse[k0] - sse[k]
+        lr = gain / s2 if s2 > 0 else np.inf * np.sign(gain)
+        return bool(lr > threshold and val_sse[k] < val_sse[k0])
+
     for k, (name, row) in enumerate(prep.rows):
+        if name == LINEAR_TWIN:
+            continue
+        if refits_linear(row):
+            # its twin: the linear re-fit whose free slots it frees too
+            k0 = [j for j in twin if np.all(row.free >= prep.rows[j][1].free)]
+            if not (k0 and beats(k, k0[0])):
+                continue
         cols = extension.get(name, [])
         table = best_ext if any(row.free[i] for i in cols) else best
         if name not in table or sse[k] < sse[table[name]]:
             table[name] = k
-    threshold = 2.0 * np.log(1.0 / LR_ALPHA)
     for name, k in best_ext.items():
         if name not in best:
             best[name] = k
             continue
-        p = n_fitted(prep, k)
-        s2 = sse[k] / max(prep.n_est - p, 1)
-        gain = sse[best[name]] - sse[k]
-        lr = gain / s2 if s2 > 0 else np.inf * np.sign(gain)
-        if lr > threshold and val_sse[k] < val_sse[best[name]]:
+        if beats(k, best[name]):
             best[name] = k
     return best
 

@@ -3,8 +3,10 @@ to $y = |w|$ under a symmetric input keeps a numerator of about zero static gain
 ($E[|w_k| v_{k-j}] = 0$), so only a row that re-fits the whole linear block, with
 an output level for a record centred on its means, can recover $G$.
 
-Checked: the row exists only for a fitted discrete nominal; at its neutral values
-it is the nominal exactly; on a noise-free sign-blind plant (the premise measured:
+Checked: the row and its linear twin (the same re-fit with the effect held
+neutral) exist only for a fitted discrete nominal; at neutral values both are the
+nominal exactly; the row stands for its class only if it beats the twin by the
+nested likelihood ratio and on validation; on a noise-free sign-blind plant (the premise measured:
 the fitted nominal's static gain is near zero) it names `output_nonlinearity`,
 closes the gap and recovers the poles of $G$, where the same nominal given as a
 model.json (no such row) cannot close it."""
@@ -20,7 +22,11 @@ from hamjax.diagnosis.augmented import numerator_slots, simulate_augmented
 from hamjax.diagnosis.diagnose import _fitted_n_params, diagnose_many
 from hamjax.diagnosis.layout import (
     FITTED_ORDER,
+    LINEAR_TWIN,
+    LR_ALPHA,
     N_MAX,
+    best_row_per_class,
+    n_fitted,
     nominal_output,
     prepare,
     refits_linear,
@@ -59,15 +65,20 @@ def test_row_offered_only_for_a_fitted_discrete_nominal(getkey):
     lin = hj.ContinuousTransferFunction(np.array([1.0]), np.array([0.5, 1.0]))
     ct = prepare(hj.Hammerstein(hj.Identity(), lin), DT, est, val, fitted_nominal=True)
     rows = [(n, r) for n, r in own.rows if refits_linear(r)]
-    assert [n for n, _ in rows] == ["output_nonlinearity"]
+    assert [n for n, _ in rows] == ["output_nonlinearity", LINEAR_TWIN]
     assert not any(refits_linear(r) for _, r in given.rows + ct.rows)
-    assert len(own.rows) == len(given.rows) + 1
-    (_, row), names = rows[0], hj.diagnosis.augmented.slot_names(N_MAX)
-    free = {n for n, f in zip(names, np.asarray(row.free), strict=True) if f}
+    assert len(own.rows) == len(given.rows) + 2
+    names = hj.diagnosis.augmented.slot_names(N_MAX)
+    free = [
+        {n for n, f in zip(names, np.asarray(r.free), strict=True) if f}
+        for _, r in rows
+    ]
     # the block of the highest order the nominal fit selects, whatever it selected
     dens = {f"den{j}" for j in range(1, FITTED_ORDER + 1)}
     nums = set(numerator_slots(N_MAX)[: FITTED_ORDER + 1])
-    assert free == dens | nums | {"out_abs", "out_off"}
+    assert free[0] == dens | nums | {"out_abs", "out_off"}
+    # the twin: the same re-fit and output level, the effect (out_abs) neutral
+    assert free[1] == dens | nums | {"out_off"}
 
 
 def test_row_at_neutral_is_the_nominal(getkey):
@@ -76,11 +87,58 @@ def test_row_at_neutral_is_the_nominal(getkey):
     prep = prepare(
         plant, DT, est, val, n_params=_fitted_n_params(), fitted_nominal=True
     )
-    ((_, row),) = [(n, r) for n, r in prep.rows if refits_linear(r)]
+    rows = [r for _, r in prep.rows if refits_linear(r)]
+    assert len(rows) == 2  # the row and its twin
     p = np.asarray(prep.arrays.neutral)  # every slot at neutral, db included
-    y = jax.jit(simulate_augmented)(p, row.tau, prep.arrays.v_val, prep.arrays)
     ref = nominal_output(plant, val["v"], DT)
-    np.testing.assert_allclose(np.asarray(y)[: ref.shape[0]], ref, rtol=0, atol=1e-12)
+    for row in rows:
+        y = jax.jit(simulate_augmented)(p, row.tau, prep.arrays.v_val, prep.arrays)
+        np.testing.assert_allclose(
+            np.asarray(y)[: ref.shape[0]], ref, rtol=0, atol=1e-12
+        )
+
+
+def test_row_stands_for_its_class_only_over_its_twin(getkey):
+    # What a re-fit of the whole linear block gains (a closed loop's dynamics, an
+    # order the selection missed) must not name an output nonlinearity: the row
+    # needs the nested ratio (S_twin - S_row) / (S_row / (n - p)) above
+    # 2 ln(1 / alpha) (chi2_1 at alpha) and a lower validation SSE than its twin.
+    est, val = _records(getkey())
+    prep = prepare(
+        fit_nominal(DT, est),
+        DT,
+        est,
+        val,
+        n_params=_fitted_n_params(),
+        fitted_nominal=True,
+    )
+    names = [n for n, _ in prep.rows]
+    k_row = next(
+        k
+        for k, (n, r) in enumerate(prep.rows)
+        if n == "output_nonlinearity" and refits_linear(r)
+    )
+    k_twin = names.index(LINEAR_TWIN)
+    others = [
+        k for k, n in enumerate(names) if n == "output_nonlinearity" and k != k_row
+    ]
+    s_row = 100.0
+    s2 = s_row / (prep.n_est - n_fitted(prep, k_row))
+    star = 2.0 * np.log(1.0 / LR_ALPHA)
+
+    def chosen(lr: float, val_row: float) -> bool:
+        sse = np.full(len(names), 1e3)
+        val_sse = np.full(len(names), 1e3)
+        sse[k_row], sse[k_twin] = s_row, s_row + lr * s2
+        val_sse[k_row], val_sse[k_twin] = val_row, 50.0
+        best = best_row_per_class(prep, sse, val_sse)
+        assert LINEAR_TWIN not in best
+        assert best["output_nonlinearity"] in [k_row, *others]
+        return best["output_nonlinearity"] == k_row
+
+    assert chosen(1.05 * star, 40.0)
+    assert not chosen(0.95 * star, 40.0)  # the ratio too small
+    assert not chosen(1.05 * star, 60.0)  # worse than the twin on validation
 
 
 @pytest.mark.slow

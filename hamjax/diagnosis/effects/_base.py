@@ -67,6 +67,9 @@ class AbstractEffect(eqx.Module):
     # one stands for the class only if the likelihood ratio over the class's best
     # simpler row is significant (`layout.best_row_per_class`)
     extension: ClassVar[tuple[str, ...]] = ()
+    # slots that are a level (an offset) beside the effect, not the effect: the
+    # linear twin of a `REFIT_LINEAR` row keeps them free (`layout.LINEAR_TWIN`)
+    level: ClassVar[tuple[str, ...]] = ()
     deterministic: ClassVar[bool] = True
 
     def scales(self, ctx: StartContext) -> dict[str, float]:

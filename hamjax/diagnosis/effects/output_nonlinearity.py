@@ -62,6 +62,7 @@ class OutputNonlinearityEffect(AbstractEffect):
     }
     positive = ("out_db",)
     unit_interval = ("out_abs",)
+    level = ("out_off",)
 
     def scales(self, ctx: StartContext) -> dict[str, float]:
         half = output_half_range(ctx)

@@ -61,7 +61,26 @@ Decisions, in order:
   the re-fit, never chooses it.
 - otherwise a *noise-model* effect (`drift`, `coloured_noise`) when its one-step-ahead
   predictor of the nominal residual is significant against the white-noise
-  predictor (the same two conditions). The two classes are told apart by the
+  predictor (the same two conditions), unless *the gap through the noise
+  predictor* is significant: each deterministic candidate's validation residual
+  seen through that predictor's filter $A$ (fitted on the nominal's estimation
+  residual), the best of them against the nominal with it by `_over_noise`
+  (the veto's test below, at $z^\\star$, with its derivation: under "the gap is
+  noise" its $d$ has mean $\\le 0$ whichever candidate is tried, so the level
+  is that of the deterministic-gap step, Bonferroni over the same candidates);
+  then the best structural candidate through $A$ against the re-fit through
+  $A$ ($z_{struct}$), else the re-fit. A coloured disturbance (a control
+  loop's load, a slow drift) inflates the batch-means se of the simulation
+  comparison until no deterministic effect is significant; whitened, the same
+  evidence is judged against the innovations alone, which is what a
+  prediction-error comparison does (issue 19: never name a noise model merely
+  because the disturbance is coloured). Measured (2026-12-03; fits cached and
+  re-decided, so both forms see the same fits; no constant added): family A
+  realistic seed 0 0.963 -> 0.963 and family B seed 0 0.854 -> 0.854 (no case
+  changed, false alarm 0/21 and 0/17); control loops seed 0 stiction recall
+  0.800 -> 0.825, false alarm 0/40 -> 0/40; the 77 real stiction loops (labels
+  withheld): 5 of 50 `coloured_noise` names change (2 `friction`, 1
+  `dead_zone`, 1 `time_delay`, 1 `parameter_mismatch`). The two noise classes are told apart by the
   contract's definitions, not by a constant chosen on cases: drift is a trend
   *plus* the white noise, coloured noise has no white part, and a local level's
   white share of its innovations is $1 - \\alpha$ (`effects/drift.py`), so drift
@@ -162,6 +181,7 @@ Z_STRUCT = 3.0  # structural vs re-fit: one comparison per case, t_19 at ~0.4 %
 Z_CONFIRM = 2.0  # validation z that confirms a candidate the likelihood ratio picked
 RHO = 0.02
 SHRINK_EXPLAINED = 0.5
+THROUGH_NOISE = True  # judge the gap through the noise predictor too (docstring)
 # the catalogue of `layout.DETERMINISTIC`, in its order, and each effect's slots
 DETERMINISTIC_NAMES = tuple(e.name for e in DETERMINISTIC)
 NOISE_NAMES = ("drift", "coloured_noise")
@@ -248,6 +268,17 @@ def attribution(
         r_before=r_before,
         y_nominal=y_nominal,
     )
+
+
+def significant(
+    r_a: np.ndarray, r_b: np.ndarray, floor2: float, z_star: float = Z_STAR
+) -> tuple[bool, float]:
+    """Whether residual `r_b` improves on `r_a` on validation by the rule's two
+    conditions (module docstring): batch-means $z > z^\\star$ and a mean-square
+    gain above $\\rho$ times `floor2`. Returns `(significant, z)`."""
+    z = improvement_z(r_a, r_b)
+    gain = float(np.mean(r_a**2) - np.mean(r_b**2))
+    return bool((z > z_star) and (gain > RHO * floor2)), z
 
 
 def _params(prep: Prepared, fit: dict, row: int, effect: str) -> dict:
@@ -343,6 +374,48 @@ def _over_noise(noise_c: Candidate, r_val: np.ndarray, sig) -> dict:
     }
 
 
+def _gap_through_noise(
+    noise_c: Candidate, cands: dict, det: list, sig, tests: dict
+) -> Candidate | None:
+    """The deterministic gap judged with the noise model on top (module
+    docstring, *The gap through the noise predictor*): every deterministic
+    candidate's validation residual through `noise_c`'s one-step predictor; the
+    best against the nominal with it (`_over_noise`, $z^\\star$), then the best
+    structural one against the re-fit, both through the same filter
+    ($z_{struct}$). Returns the candidate named, or None (the noise model)."""
+    ((name, param),) = noise_c.params.items()
+
+    def white(c: Candidate) -> np.ndarray:
+        if not np.all(np.isfinite(c.residual)):
+            return np.full_like(c.residual, np.inf)
+        return predictor_errors(name, param["value"], c.residual)
+
+    errs = {c.effect: white(c) for c in det}
+    best = min(det, key=lambda c: rms(errs[c.effect]))
+    gap = _over_noise(noise_c, best.residual, sig)
+    gap["best"] = best.effect
+    tests["gap_through_noise"] = gap
+    if not gap["significant"]:
+        return None
+    pm = cands["parameter_mismatch"]
+    structural = [c for c in det if c.effect != "parameter_mismatch"]
+    best_s = min(structural, key=lambda c: rms(errs[c.effect]))
+    e_pm, e_s = errs[pm.effect], errs[best_s.effect]
+    s_sig, z_s = sig(e_pm, e_s, rms(e_s) ** 2, z_star=Z_STRUCT)
+    tests["structural_vs_refit_through_noise"] = {
+        "z": z_s,
+        "significant": s_sig,
+        "best": best_s.effect,
+    }
+    if s_sig:
+        return best_s
+    return (
+        pm
+        if best is pm or _over_noise(noise_c, pm.residual, sig)["significant"]
+        else best
+    )
+
+
 def structural_choice(
     structural: list, est_sse: dict, n_params: dict
 ) -> tuple[Candidate, dict]:
@@ -412,11 +485,7 @@ def attribute(prep: Prepared, fit: dict) -> Attribution:
             est_sse=est_sse,
         )
 
-    def sig(r_a, r_b, floor2, z_star=Z_STAR):
-        z = improvement_z(r_a, r_b)
-        gain = float(np.mean(r_a**2) - np.mean(r_b**2))
-        ok = (z > z_star) and (gain > RHO * floor2)
-        return ok, z
+    sig = significant
 
     def noise_test():
         """The noise model of the higher likelihood on the estimation record (one
@@ -471,6 +540,10 @@ def attribute(prep: Prepared, fit: dict) -> Attribution:
         noise_c, n_sig = noise_test()
         if n_sig:
             effect, chosen = noise_c.effect, noise_c
+            if THROUGH_NOISE:
+                named = _gap_through_noise(noise_c, cands, det, sig, tests)
+                if named is not None:
+                    effect, chosen = named.effect, named
     gap_before, gap_after, floor, shrink = gaps(r_before, chosen)
     partial = (
         chosen is not None

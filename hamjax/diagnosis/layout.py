@@ -498,7 +498,12 @@ def prepare(
         NL_BACKLASH: ("out_scale",),
     }.get(nom.nl_kind, ("gain",))
     taus_tried = delay_shortlist(
-        est["y"], w_est, max_delay=delay_range(t_dom, n_est), t_dom=t_dom
+        est["y"],
+        w_est,
+        step=_response_numpy(plant.linear, np.ones(n_est), dt),
+        u0=float(u_est[0]),
+        max_delay=delay_range(t_dom, n_est),
+        t_dom=t_dom,
     )
 
     def _row(name, base, start, flip, tau):

@@ -21,6 +21,7 @@ from hamjax.diagnosis.effects.time_delay import (
     MAX_DELAY,
     delay_range,
     delay_shortlist,
+    delayed_response,
     dominant_time_constant,
     fractional_split,
 )
@@ -181,12 +182,42 @@ def test_shortlist_sees_through_a_mis_set_time_constant(getkey):
     # keeps the true whole part.
     # (held for one time constant: the slow record where a lag passes for a shift)
     v = staircase(getkey(), 2000, hold=40)
-    y = _zoh_delayed_lag(v, 1.5, t_lag=1.25 * T_LAG)
+    y = _zoh_delayed_lag(v, 1.5, t_lag=1.25 * T_LAG, hold_v0=True)
     w = _zoh_delayed_lag(v, 0.0)
-    kept = delay_shortlist(y, w, max_delay=40, t_dom=T_LAG / DT)
+    start = {"step": _zoh_delayed_lag(np.ones(2000), 0.0), "u0": float(v[0])}
+    kept = delay_shortlist(y, w, **start, max_delay=40, t_dom=T_LAG / DT)
     assert 1 in kept, kept
-    plain = delay_shortlist(y, w, max_delay=40, t_dom=np.inf)  # no re-fit
+    plain = delay_shortlist(y, w, **start, max_delay=40, t_dom=np.inf)  # no re-fit
     assert 1 not in plain, plain
+
+
+@pytest.mark.parametrize("m", [0, 3, 14])
+def test_delayed_response_is_the_held_input_response(getkey, m):
+    # against the independent reference (lsim of the held, delayed input on a
+    # grid 20 times finer): w_{k-m} + u0 (s_k - s_{k-m}) is exact for a block from
+    # rest, to the rounding of the two filters (outputs of order 1)
+    v = staircase(getkey(), 400, hold=10)
+    w = _zoh_delayed_lag(v, 0.0)
+    step = _zoh_delayed_lag(np.ones(400), 0.0)
+    ref = _zoh_delayed_lag(v, float(m), hold_v0=True)
+    assert np.allclose(delayed_response(w, step, float(v[0]), m), ref, atol=1e-10)
+
+
+def test_shortlist_keeps_a_long_delay_behind_a_held_first_level(getkey):
+    # Failure mode (seen at 14 samples behind a lag of 40): shifting the nominal
+    # output held its first value, 0, where the model holds v_0; over the first
+    # m samples the lag's rise under v_0 then outweighed the delay's own
+    # signature and the screen kept 12 and 13, not 14. A first level of 0.9
+    # (the staircase's are uniform in [-1, 1]) makes that rise large; three
+    # draws (the old screen ranked 13 first on 4 of 5 keys tried).
+    step = _zoh_delayed_lag(np.ones(400), 0.0)
+    for _ in range(3):
+        v = staircase(getkey(), 400, hold=10)
+        v[:10] = 0.9
+        y = _zoh_delayed_lag(v, 14.0, hold_v0=True)
+        w = _zoh_delayed_lag(v, 0.0)
+        kept = delay_shortlist(y, w, step=step, u0=0.9, max_delay=40, t_dom=T_LAG / DT)
+        assert kept[0] == 14, kept
 
 
 @pytest.mark.slow

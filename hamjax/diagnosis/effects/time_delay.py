@@ -78,42 +78,77 @@ def delay_range(t_dom: float, n: int) -> int:
 
 
 def _lag(w: np.ndarray, t: float) -> np.ndarray:
-    """$w$ through the unit-gain lag $(1 - c) / (1 - c q^{-1})$, $c = e^{-1/t}$,
-    started at rest at $w_0$ (`lfilter_numpy` of $w - w_0$, plus $w_0$)."""
+    """`w` through the unit-gain lag $(1 - c) / (1 - c q^{-1})$, $c = e^{-1/t}$,
+    from rest (`lfilter_numpy`)."""
     c = float(np.exp(-1.0 / t))
-    return w[0] + lfilter_numpy([1.0 - c, 0.0], [1.0, -c], w - w[0])
+    return lfilter_numpy([1.0 - c, 0.0], [1.0, -c], w)
+
+
+def _shift(x: np.ndarray, m: int) -> np.ndarray:
+    """$x_{k-m}$, zero before $t = 0$ (a block at rest)."""
+    if m == 0:
+        return x
+    return np.concatenate([np.zeros(m), x[: x.shape[0] - m]])
+
+
+def delayed_response(w: np.ndarray, step: np.ndarray, u0: float, m: int) -> np.ndarray:
+    r"""The output of a linear block from rest for its input delayed by $m$
+    samples with $u_0$ held before $t = 0$ (`delay`, the contract), from its
+    response `w` to the undelayed input and `step` to the unit step.
+
+    The held input is $u_{k-m}$ for $k \ge m$ and $u_0$ before: $u$ shifted from
+    rest plus a pulse of height $u_0$ over $k < m$, so the output is
+    $w_{k-m} + u_0 (s_k - s_{k-m})$ ($w$, $s$ zero before $t = 0$). A static map,
+    or a backlash started in its play, commutes with the delay (a held $v_0$
+    gives a held $u_0$), so `w` may be a whole nominal's output."""
+    return _shift(w, m) + u0 * (step - _shift(step, m))
 
 
 def delay_shortlist(
-    y: np.ndarray, w: np.ndarray, *, max_delay: int, t_dom: float, keep: int = 2
+    y: np.ndarray,
+    w: np.ndarray,
+    *,
+    step: np.ndarray,
+    u0: float,
+    max_delay: int,
+    t_dom: float,
+    keep: int = 2,
 ) -> tuple[int, ...]:
     """The whole parts $m$ of the `keep` delays $m + f$ ($f$ on a grid of
-    `SCREEN_STEP`, $0 < m + f \\le$ `max_delay`) whose shifted nominal output
+    `SCREEN_STEP`, $0 < m + f \\le$ `max_delay`) whose delayed nominal output
     fits `y` best, one per whole part (a cheap screen; the rows of the kept $m$
     then fit $f$ with the nominal re-fit).
 
-    The shift is split as in `fractional_split`, and the fit is linear least
-    squares on the shifted $w$ and the same through the lag of the nominal's
-    dominant time constant $T$ (`t_dom`, samples; skipped when not finite or
-    under one sample): for a first-order mode $\\partial w / \\partial T \\propto
-    w - \\mathrm{lag}_T(w)$, so the two span the nominal's re-fit of its gain and
+    `w`: the nominal output from rest, `step` its linear block's unit-step
+    response, `u0` the block's first input: the delayed outputs are those of the
+    model (`delayed_response`; shifting `w` itself would hold $w_0$ instead of
+    $v_0$, and behind a slow lag the difference over the first $m$ samples
+    outweighs the delay's own signature). The fraction is split as in
+    `fractional_split` (from rest). The fit is linear least squares on the
+    delayed output and the same through the lag of the nominal's dominant time
+    constant $T$ (`t_dom`, samples; skipped when not finite or under one
+    sample): for a first-order mode $\\partial w / \\partial T \\propto w -
+    \\mathrm{lag}_T(w)$, so the two span the nominal's re-fit of its gain and
     $T$ to first order, and a mis-set time constant (15-20 % is common) does not
     pass for a shift."""
     y, w = np.asarray(y, float), np.asarray(w, float)
-    n = w.shape[0]
-    if not (np.all(np.isfinite(w)) and np.all(np.isfinite(y))):
+    step = np.asarray(step, float)
+    if not (
+        np.all(np.isfinite(w)) and np.all(np.isfinite(y)) and np.all(np.isfinite(step))
+    ):
         # an overflowing nominal: nothing to screen; the fits report it as not
         # finite (`DiagnosisNotFinite`), a least-squares solve here would raise
         return tuple(range(1, min(keep, max_delay) + 1))
-    series = [w] + ([_lag(w, t_dom)] if np.isfinite(t_dom) and t_dom >= 1 else [])
-    # each series with its first value held before t = 0
-    held = [np.concatenate([np.full(max_delay + 1, x[0]), x]) for x in series]
+    series = [(w, step)]
+    if np.isfinite(t_dom) and t_dom >= 1:
+        # the lag is linear and time-invariant: it commutes with the delay
+        series.append((_lag(w, t_dom), _lag(step, t_dom)))
     best: dict[int, float] = {}
     for d in np.arange(SCREEN_STEP, max_delay + 1e-9, SCREEN_STEP):
         m = int(np.floor(d + 1e-9))
         f = float(d - m)
-        lo, hi = max_delay + 1 - m, max_delay - m
-        X = np.stack([(1 - f) * h[lo : lo + n] + f * h[hi : hi + n] for h in held], 1)
+        cols = [delayed_response(x, s, float(u0), m) for x, s in series]
+        X = np.stack([(1 - f) * c + f * _shift(c, 1) for c in cols], 1)
         coef = np.linalg.lstsq(X, y, rcond=None)[0]
         sse = float(np.sum((y - X @ coef) ** 2))
         best[m] = min(best.get(m, np.inf), sse)

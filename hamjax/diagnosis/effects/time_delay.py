@@ -144,14 +144,19 @@ def delay_shortlist(
         # the lag is linear and time-invariant: it commutes with the delay
         series.append((_lag(w, t_dom), _lag(step, t_dom)))
     best: dict[int, float] = {}
-    for d in np.arange(SCREEN_STEP, max_delay + 1e-9, SCREEN_STEP):
-        m = int(np.floor(d + 1e-9))
-        f = float(d - m)
+    for m in range(max_delay + 1):
+        # each whole part's delayed outputs once, for all its fractions
         cols = [delayed_response(x, s, float(u0), m) for x, s in series]
-        X = np.stack([(1 - f) * c + f * _shift(c, 1) for c in cols], 1)
-        coef = np.linalg.lstsq(X, y, rcond=None)[0]
-        sse = float(np.sum((y - X @ coef) ** 2))
-        best[m] = min(best.get(m, np.inf), sse)
+        later = [_shift(c, 1) for c in cols]
+        for f in np.arange(0.0, 1.0, SCREEN_STEP):
+            if not 0 < m + f <= max_delay:
+                continue
+            X = np.stack(
+                [(1 - f) * c + f * c1 for c, c1 in zip(cols, later, strict=True)], 1
+            )
+            coef = np.linalg.lstsq(X, y, rcond=None)[0]
+            sse = float(np.sum((y - X @ coef) ** 2))
+            best[m] = min(best.get(m, np.inf), sse)
     return tuple(sorted(best, key=lambda m: best[m])[:keep])
 
 

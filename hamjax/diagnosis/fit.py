@@ -179,7 +179,7 @@ def _row_problem(theta, args):
     return _normal_equations(theta, row, case, flags)
 
 
-def _solve_row(row, case, flags, max_steps, lam0):
+def _solve_row(row, case, flags, max_steps, lam0, resume=False):
     """`fitting.BatchedLevenbergMarquardt` on the row's normal equations plus a
     Gaussian prior at the nominal parameters, of weight `case.prior_weight`
     (`layout.prior_weight`: the user's stated nominal uncertainty, so the cost is
@@ -190,7 +190,7 @@ def _solve_row(row, case, flags, max_steps, lam0):
     point instead of wherever its path stopped."""
     return least_squares(
         NormalEquations(_row_problem),
-        BatchedLevenbergMarquardt(lam0=lam0),
+        BatchedLevenbergMarquardt(lam0=lam0, resume=resume),
         row.theta0,
         (row, case, flags),
         max_steps=max_steps,
@@ -207,14 +207,18 @@ def fit_row(
     memory: bool | Bool[Array, ""] = True,
     table: bool | Bool[Array, ""] = True,
     feedback: bool | Bool[Array, ""] = True,
+    *,
+    resume: bool | Bool[Array, ""] = False,
 ) -> RowFit:
     """Fit one row from `row.theta0` (the nominal slots start at nominal).
     `memory`, `table`, `feedback`: as in `simulate_augmented` and `static_part`
     (False only if the row frees neither the rate limit nor the backlash and the
     case's map is not a backlash, if the map reads no table (`uses_table`), and if
-    the row frees no feedback slot)."""
+    the row frees no feedback slot). `resume`: `row.theta0` and `lam0` are a
+    stopped fit's `theta` and `lam`, continued exactly
+    (`fitting.BatchedLevenbergMarquardt`)."""
     flags = (memory, table, feedback)
-    sol = _solve_row(row, case, flags, max_steps, lam0)
+    sol = _solve_row(row, case, flags, max_steps, lam0, resume)
     theta, (p, b, a), sse = sol.value, sol.aux, sol.stats["sse"]
     n = jnp.sum(case.m_est)
     used = row.idx < case.anchor.shape[0]
@@ -261,6 +265,7 @@ def _fit_flat(
     cases: CaseArrays,
     max_steps,
     lam0,
+    resume,
     memory=None,
     table=None,
     feedback=None,
@@ -279,12 +284,15 @@ def _fit_flat(
         table = jnp.any(uses_table(cases.nl_kind))
     if feedback is None:
         feedback = jnp.any(uses_feedback(rows.free))
-    fit = lambda r, c, k, lam: fit_row(r, c, k, lam, memory, table, feedback)  # noqa: E731
-    return jax.vmap(fit)(rows, cases, max_steps, lam0)
+
+    def fit(r, c, k, lam, res):
+        return fit_row(r, c, k, lam, memory, table, feedback, resume=res)
+
+    return jax.vmap(fit)(rows, cases, max_steps, lam0, resume)
 
 
 def _fit_flat_sharded(
-    rows, cases, max_steps, lam0, memory=None, table=None, feedback=None
+    rows, cases, max_steps, lam0, resume, memory=None, table=None, feedback=None
 ):
     mesh = Mesh(np.asarray(jax.local_devices()), ("d",))
     spec = PartitionSpec("d")
@@ -293,11 +301,11 @@ def _fit_flat_sharded(
     fn = jax.shard_map(
         ft.partial(_fit_flat, memory=memory, table=table, feedback=feedback),
         mesh=mesh,
-        in_specs=(spec, spec, spec, spec),
+        in_specs=(spec, spec, spec, spec, spec),
         out_specs=spec,
         check_vma=False,
     )
-    return fn(rows, cases, max_steps, lam0)
+    return fn(rows, cases, max_steps, lam0, resume)
 
 
 # XLA's CPU back end compiles this program (~300 fusions, most of them small loop
@@ -327,6 +335,7 @@ def fit_batch(
     lam0: Float[np.ndarray, " N"],
     while_compiling: Callable[[], None] | None = None,
     *,
+    resume: Bool[np.ndarray, " N"] | None = None,
     memory: bool | None = None,
     table: bool | None = None,
     feedback: bool | None = None,
@@ -340,6 +349,9 @@ def fit_batch(
     dampings are traced, so changing them does not recompile; the cost of a batch is
     that of its longest-running row. `while_compiling` is called once the program
     for these shapes is traced, if it has to be compiled (work to overlap with it).
+    `resume[i]`: row `i` continues a stopped fit exactly (its `theta0` and `lam0`
+    the stopped fit's `theta` and `lam`, its budget one step more than it has
+    left; `fitting.BatchedLevenbergMarquardt`); None: no row does.
     `memory`, `table`, `feedback`: whether the rows need the input-memory scan,
     the table look-up and the feedback loop, when that is known for every batch
     of a call (a smaller program); None (default) decides per batch at run time.
@@ -349,6 +361,7 @@ def fit_batch(
         cases,
         np.asarray(max_steps, dtype=np.int32),
         np.asarray(lam0, dtype=float),
+        np.zeros(len(lam0), bool) if resume is None else np.asarray(resume, bool),
     )
     n_dev = jax.local_device_count()  # this process's: cases split over processes
     sharded = n_dev > 1 and rows.theta0.shape[0] % n_dev == 0

@@ -10,7 +10,10 @@ one compilation per record length serves a whole call:
    rows the decision rests on get up to `FINISH_STEPS` more, in a first pass of
    `FIRST_PASS` steps;
 3. **Continuation**: a finishing row still moving after its first pass is queued
-   again with its remaining budget and its damping (it resumes where it stopped).
+   again with its remaining budget and its damping, and resumes exactly where it
+   stopped (`fit.fit_batch`'s `resume`): a row's fit is the same whether its
+   budget ran in one batch or in several, so it does not depend on how many
+   cases share the call.
 
 Most finishing rows converge within the first pass, and a batch costs as much as
 its slowest row: queueing the slow ones together, instead of letting each batch
@@ -65,7 +68,7 @@ class Item:
     row: int
     theta0: np.ndarray
     lam0: float
-    budget: int
+    budget: int  # steps, the re-evaluation of `theta0` of a resumed item included
     stage: str  # "screen", "finish" or "more"
     replace: str  # when the result replaces the row's: "always", "lower", "stopped"
 
@@ -122,14 +125,18 @@ def finishing_items(c: int, prep: Prepared, fits: dict) -> list[Item]:
 
 
 def merge(fits: dict, item: Item, new: dict) -> None:
-    """Write a finished item's fit into its case's rows when the rule allows."""
+    """Write a finished item's fit into its case's rows when the rule allows: a
+    screening fit always; after it, the lowest estimation SSE of the row's fits
+    (a continuation also at a tie, a restart only if strictly lower). A row's
+    finishing items may finish in either order (in one batch or in several, by
+    the cases sharing the call), and the row ends the same."""
     k = item.row
     if item.replace == "always":
         take = True
     elif item.replace == "lower":  # a restart: kept only if strictly better
         take = new["sse_est"] < fits["sse_est"][k]
     else:  # a continuation: kept if it did not get worse
-        take = fits["result"][k] != SUCCESSFUL and new["sse_est"] <= fits["sse_est"][k]
+        take = new["sse_est"] <= fits["sse_est"][k]
     if take:
         for name in FIELDS:
             fits[name][k] = new[name]
@@ -217,12 +224,12 @@ def run_queue(
             and spent < item.budget
         ):
             queues["more"].append(
-                Item(
+                Item(  # resumes with its pending step (one more step to re-evaluate)
                     c,
                     item.row,
                     new["theta"],
-                    3.0 * float(new["lam"]),  # resumes with the same damping
-                    item.budget - spent,
+                    float(new["lam"]),
+                    item.budget - spent + 1,
                     "more",
                     item.replace,
                 )
@@ -290,6 +297,7 @@ def run_batch(
             np.asarray(budgets + [0] * pad, dtype=np.int32),
             np.asarray([it.lam0 for it in items]),
             while_compiling,
+            resume=np.asarray([it.stage == "more" for it in items]),
             **(flags or {}),
         )
     )

@@ -73,9 +73,13 @@ class BatchedLevenbergMarquardt(eqx.Module):
     accepted point), the step by `_linalg.cholesky_solve` (plain `jax.numpy`
     loops, no LAPACK custom call: those were seen to hang with two devices), and
     a problem that may give its normal equations directly (`NormalEquations`).
-    The step budget and `lam0` may be traced (a different budget does not
-    recompile). The first iteration accepts `theta0` and divides `lam0` by 3, so
-    a fit stopped with damping `lam` continues seamlessly from `lam0 = 3 lam`.
+    The step budget, `lam0` and `resume` may be traced (a different budget does
+    not recompile). The first iteration accepts `theta0` and divides `lam0` by 3;
+    with `resume=True` it keeps `lam0`, so a fit stopped at its budget with
+    damping `lam` (`stats["damping"]`, that of its pending step) and continued
+    from its `value` with `lam0 = lam`, `resume=True` and one step more than it
+    has left (the first re-evaluates `value`) takes exactly the steps it would
+    have taken without stopping.
 
     Stops as `successful` when a nearly undamped step (`lam <= lam_converged`)
     lowers the cost by at most `rtol` relative (under heavy damping a step is
@@ -85,6 +89,7 @@ class BatchedLevenbergMarquardt(eqx.Module):
     """
 
     lam0: Float[ArrayLike, ""] = LAMBDA0
+    resume: Bool[ArrayLike, ""] = False
     rtol: float = eqx.field(static=True, default=1e-10)
     atol: float = eqx.field(static=True, default=1e-12)
     lam_converged: float = eqx.field(static=True, default=LAMBDA_CONVERGED)
@@ -132,7 +137,8 @@ def _batched_lm(normal, solver, theta0, args, max_steps, prior):
             (theta, sse, H, g, aux),
         )
         cost_new = jnp.where(better, cost_n, cost)
-        lam = jnp.where(better, lam / 3, lam * 4)
+        keep = (k == 0) & solver.resume  # a resumed fit's pending step as it was
+        lam = jnp.where(better, jnp.where(keep, lam, lam / 3), lam * 4)
         if prior is None:
             Hp, gp = H, g
         else:

@@ -40,6 +40,24 @@ def cholesky_solve(
     return z[:, 0] if b.ndim == 1 else z
 
 
+def polymul(a: Float[Array, " n"], b: Float[Array, " m"]) -> Float[Array, " n+m-1"]:
+    """The product of two polynomials' coefficient vectors (either order of
+    powers): `jnp.convolve(a, b)`, written as `len(b)` shifted multiply-adds.
+
+    Not `jnp.convolve`: under `vmap` JAX turns a convolution of batched operands
+    into one grouped convolution, which XLA's CPU back end computes as a dense
+    convolution with zero weights between the rows of the batch. A NaN or inf in
+    one row's coefficients then turns every other row's product into NaN (0 x inf),
+    and the rounding of each row changes with the batch size. Here each row is
+    its own: the same numbers alone or in any batch.
+    """
+    n, m = a.shape[0], b.shape[0]
+    out = jnp.zeros(n + m - 1, jnp.result_type(a, b))
+    for j in range(m):  # m is static and small (a polynomial's degree + 1)
+        out = out.at[j : j + n].add(a * b[j])
+    return out
+
+
 def charpoly_adjugate(A: Array) -> tuple[Array, Array]:
     """Faddeev-LeVerrier: monic char. poly (highest power first) and the matrices
     $M_k$ with $\\mathrm{adj}(zI - A) = \\sum_k M_k z^{n-k}$ (products only, so it

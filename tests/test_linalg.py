@@ -1,11 +1,12 @@
-"""`hamjax._linalg.cholesky_solve` against NumPy's LAPACK solve."""
+"""`hamjax._linalg`: `cholesky_solve` against NumPy's LAPACK solve, `polymul`
+against `np.convolve`."""
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from hamjax._linalg import cholesky_solve
+from hamjax._linalg import cholesky_solve, polymul
 
 
 def _spd(rng, n, cond=1e3):
@@ -43,3 +44,33 @@ def test_vmap_and_not_positive_definite():
     # an indefinite matrix must not return a plausible-looking answer
     x = cholesky_solve(-jnp.asarray(As[0]), jnp.asarray(bs[0]))
     assert np.all(np.isnan(np.asarray(x)))
+
+
+@pytest.mark.parametrize("n, m", [(1, 1), (3, 2), (5, 5), (2, 7)])
+def test_polymul_matches_numpy_convolve(n, m):
+    rng = np.random.default_rng(10 * n + m)
+    a, b = rng.normal(size=n), rng.normal(size=m)
+    # each output is a sum of at most min(n, m) products: rounding only
+    np.testing.assert_allclose(
+        polymul(jnp.asarray(a), jnp.asarray(b)),
+        np.convolve(a, b),
+        rtol=1e-14,
+        atol=1e-15,
+    )
+
+
+def test_polymul_rows_of_a_batch_stay_apart():
+    # Under vmap `jnp.convolve` becomes one grouped convolution, computed on CPU as
+    # a dense one with zero weights between rows: an inf in one row made every
+    # other row NaN (0 x inf), which stalled the diagnosis's fits of whole cases
+    # batched beside a diverging row. Each row must equal its own product,
+    # bit for bit, whatever its batch-mates hold.
+    rng = np.random.default_rng(1)
+    A, B = rng.normal(size=(4, 5)), rng.normal(size=(4, 2))
+    A[2], B[3] = np.inf, np.nan
+    out = np.asarray(jax.vmap(polymul)(jnp.asarray(A), jnp.asarray(B)))
+    for k in (0, 1):
+        np.testing.assert_array_equal(
+            out[k], np.asarray(polymul(jnp.asarray(A[k]), jnp.asarray(B[k])))
+        )
+    assert np.isfinite(out[:2]).all()

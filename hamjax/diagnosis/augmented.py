@@ -39,7 +39,7 @@ import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
 from .._filters import df2t_step, expm_taylor, filter_scan, zoh_tf
-from .._linalg import charpoly_adjugate
+from .._linalg import charpoly_adjugate, polymul
 from ..models.nonlinearities.backlash import Backlash, BacklashState
 from ..models.nonlinearities.piecewise_linear import piecewise_linear_map
 from .effects._base import UNIT_MAX, StartContext, unit_raw
@@ -191,7 +191,7 @@ def linear_polynomials(p: Float[Array, " S"], case: CaseArrays) -> tuple[Array, 
     den = p[first_den : first_den + n_max]
     db = p[first_den + n_max :]
     a_disc = jnp.concatenate([jnp.ones(1), den])
-    den_ct = jnp.convolve(jnp.concatenate([case.den_lead[None], den]), case.ct_pad)
+    den_ct = polymul(jnp.concatenate([case.den_lead[None], den]), case.ct_pad)
     den_ct = den_ct[-(n_max + 1) :]
     Ad, Bd, Cc, Dc = zoh_tf(g * case.ct_num, den_ct, case.dt, expm=expm_taylor)
     c, Ms = charpoly_adjugate(Ad)
@@ -413,8 +413,8 @@ def filter_coefficients(p: Float[Array, " S"], case: CaseArrays) -> tuple[Array,
     (`time_delay.fractional_split`; linear, so folded into one filter)."""
     b, a = linear_polynomials(p, case)
     pole = jnp.clip(named(p, case)("pole"), 0.0, 0.995)
-    b = jnp.convolve(b, jnp.stack([1 - pole, jnp.zeros(())]))
-    a = jnp.convolve(a, jnp.stack([jnp.ones(()), -pole]))
+    b = polymul(b, jnp.stack([1 - pole, jnp.zeros(())]))
+    a = polymul(a, jnp.stack([jnp.ones(()), -pole]))
     return fractional_split(b, a, named(p, case)("delay_frac"))
 
 

@@ -156,6 +156,30 @@ def test_a_case_fits_the_same_alone_and_among_other_cases(monkeypatch):
     )
 
 
+def test_a_rows_fit_does_not_see_a_diverging_batch_mate():
+    # A batch-mate whose parameters are not finite (a diverging trial step) once
+    # made every row of its batch NaN: the extra pole's and the delay fraction's
+    # polynomial products were `jnp.convolve`, which `vmap` turns into one grouped
+    # convolution, computed densely with zero weights between rows (0 x NaN).
+    # Rows then rejected every step and kept their start; a real case's name
+    # changed with the cases diagnosed beside it. Same batch width both times,
+    # so the rows' fits must agree bit for bit.
+    prep = prepare(*tiny_case(jr.key(5), "saturation", noise=1e-3))
+    rows = _stack([r for _, r in prep.rows[:3]] * 2)
+    bad = eqx.tree_at(lambda r: r.theta0, rows, rows.theta0.at[3:].set(jnp.nan))
+    cases = _stack([prep.arrays] * 6)
+
+    def fit(r):
+        return fit_batch(r, cases, np.full(6, 5), np.full(6, LAMBDA0))
+
+    good, mixed = fit(rows), fit(bad)
+    assert np.isfinite(np.asarray(good.sse_est)).all()
+    for name in ("sse_est", "theta", "steps"):
+        np.testing.assert_array_equal(
+            np.asarray(getattr(mixed, name))[:3], np.asarray(getattr(good, name))[:3]
+        )
+
+
 @pytest.mark.slow
 def test_batch_without_memory_rows_skips_the_memory_scan_exactly():
     # `_fit_flat` skips the input-memory scan (rate limit, backlash) in a batch in

@@ -6,6 +6,7 @@ import numpy as np
 from jaxtyping import Array, Float, Int
 
 from ..._filters import lfilter_numpy
+from ..._linalg import polymul
 from ._base import AbstractEffect, StartContext
 
 
@@ -34,12 +35,9 @@ def fractional_split(
     they are $(1 - e^{-(1-f)h/T}) / (1 - e^{-h/T})$ and its complement, equal to
     $(1 - f, f)$ to first order in $h / T$. $f = 0$ is neutral bit for bit (a
     trailing zero tap and state)."""
-    # written out, not `jnp.convolve`: under `vmap` XLA's convolution rounds a
-    # row's taps differently with the batch size (seen at 28 vs 56 rows)
-    zero = jnp.zeros(1, b.dtype)
-    b = jnp.concatenate([b, zero]) * (1 - f) + jnp.concatenate([zero, b]) * f
-    a = jnp.concatenate([a, zero])
-    return b, a
+    return polymul(b, jnp.stack([1 - f, f])), jnp.concatenate(
+        [a, jnp.zeros(1, a.dtype)]
+    )
 
 
 def dominant_time_constant(den: np.ndarray, is_ct: bool, dt: float) -> float:

@@ -9,6 +9,7 @@ import jax.numpy as jnp
 import jax.random as jr
 from jaxtyping import Array, Float, PRNGKeyArray
 
+from ..._linalg import polymul
 from ...identification.seed001 import theta_star
 from ...identification.seed001.rank_one_prop3_1 import first_largest
 from ...models import DiscreteTransferFunction, Hammerstein, PiecewiseLinear
@@ -89,10 +90,10 @@ def random_denominator(
         complex_quad = jnp.stack([1.0, -2 * r * jnp.cos(angle), r**2])
         real_quad = jnp.stack([1.0, -(p1 + p2), p1 * p2])
         quad = jnp.where(uc < 0.5, complex_quad, real_quad)
-        poly = jnp.convolve(poly, quad)
+        poly = polymul(poly, quad)
     if order % 2:
         p = max_radius * (2 * u[-1] - 1)
-        poly = jnp.convolve(poly, jnp.stack([1.0, -p]))
+        poly = polymul(poly, jnp.stack([1.0, -p]))
     return poly[1:]
 
 

@@ -1,7 +1,10 @@
 """Test configuration: float64, strict promotion, a printed-seed key fixture."""
 
+import atexit
 import os
 import random
+import shutil
+import tempfile
 from pathlib import Path
 
 import pytest
@@ -10,8 +13,17 @@ from hamjax._runtime import avoid_eigen_pool_hang
 
 
 avoid_eigen_pool_hang()  # before jax starts its backend; see the docstring
-# CLI calls inside tests must not write XLA programs into the user's cache
-os.environ.setdefault("HAMJAX_CACHE_DIR", "off")
+# One folder of compiled XLA programs for the whole test session, shared by the
+# xdist workers (they inherit this environment) and the `hamjax` children that the
+# CLI tests start (`HAMJAX_CACHE_DIR`, `_runtime.use_compilation_cache`), never the
+# user's own cache: each module drops its compiled programs when it ends (see
+# `_fresh_compiled_programs`) and the children start cold, so the same programs
+# were compiled again and again. Results do not depend on it (XLA's cache returns
+# the program it compiled). Removed when the process that made it exits.
+if "HAMJAX_TEST_XLA_CACHE" not in os.environ:
+    os.environ["HAMJAX_TEST_XLA_CACHE"] = tempfile.mkdtemp(prefix="hamjax-xla-")
+    atexit.register(shutil.rmtree, os.environ["HAMJAX_TEST_XLA_CACHE"], True)
+os.environ["HAMJAX_CACHE_DIR"] = os.environ["HAMJAX_TEST_XLA_CACHE"]
 
 import jax  # noqa: E402
 import jax.random as jr  # noqa: E402
@@ -19,6 +31,9 @@ import jax.random as jr  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)
 jax.config.update("jax_numpy_rank_promotion", "raise")
+jax.config.update("jax_compilation_cache_dir", os.environ["HAMJAX_CACHE_DIR"])
+# programs that compile faster than this are not worth a file
+jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.2)
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared"
 

@@ -122,6 +122,7 @@ def tree_hash(folder) -> str:
 
 def run_hamjax(*args):
     """`python -m hamjax ARGS` from the repository root, in a clean environment."""
+    import os
     import subprocess
     import sys
     from pathlib import Path
@@ -135,7 +136,7 @@ def run_hamjax(*args):
         env={
             "PYTHONPATH": str(root),
             "PATH": "/usr/bin:/bin",
-            "HAMJAX_CACHE_DIR": "off",
+            "HAMJAX_CACHE_DIR": os.environ["HAMJAX_CACHE_DIR"],  # the session's
         },
     )
 

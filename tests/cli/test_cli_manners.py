@@ -21,7 +21,7 @@ ROOT = Path(__file__).resolve().parents[2]
 
 def _hamjax(*args, cwd=None):
     """Run `python -m hamjax ARGS` in a child (exit status, stdout, stderr)."""
-    env = dict(os.environ, PYTHONPATH=str(ROOT), HAMJAX_CACHE_DIR="off")
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
     p = subprocess.run(
         [sys.executable, "-m", "hamjax", *map(str, args)],
         capture_output=True,
@@ -371,7 +371,7 @@ def test_cli_outputs_follow_the_umask_in_a_child(tmp_path):
             f"--input {inp} --out {tmp_path / 'd.csv'}",
             sys.executable,
         ],
-        env=dict(os.environ, PYTHONPATH=str(ROOT), HAMJAX_CACHE_DIR="off"),
+        env=dict(os.environ, PYTHONPATH=str(ROOT)),
         capture_output=True,
     ).returncode
     assert code == 0

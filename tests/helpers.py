@@ -168,12 +168,16 @@ def assert_normal_equations_match_differences(theta, row, case, slot, *, h=1e-6)
     """`fit.normal_equations` of `row` at `theta` against central differences of
     the simulated residual (step `h`; rounding ~ eps/h ~ 1e-10 relative, so 1e-6
     is ample where the model is smooth), and slot `slot`'s column not zero."""
+    import jax
+
     from hamjax.diagnosis.augmented import simulate_row
     from hamjax.diagnosis.fit import normal_equations
 
+    # compiled once (op by op, every evaluation compiled the scans again)
+    simulate = jax.jit(lambda t: simulate_row(t, row, case.v_est, case))
+
     def residual(t):
-        y = simulate_row(t, row, case.v_est, case)
-        return np.asarray((y - case.y_est) * case.m_est / case.y_scale)
+        return np.asarray((simulate(t) - case.y_est) * case.m_est / case.y_scale)
 
     r0 = residual(theta)
     J = np.stack(
@@ -183,7 +187,7 @@ def assert_normal_equations_match_differences(theta, row, case, slot, *, h=1e-6)
         ],
         axis=1,
     )
-    sse, H, g = normal_equations(theta, row, case)
+    sse, H, g = jax.jit(normal_equations)(theta, row, case)
     np.testing.assert_allclose(sse, r0 @ r0, rtol=1e-12)
     np.testing.assert_allclose(H, J.T @ J, rtol=1e-6, atol=1e-8 * np.abs(H).max())
     np.testing.assert_allclose(g, J.T @ r0, rtol=1e-6, atol=1e-8 * np.abs(g).max())

@@ -97,14 +97,17 @@ def test_neutral_slide_leaves_every_row_bit_for_bit():
     prep = _case(v)
     case = prep.arrays
     vj = jnp.asarray(case.v_est)
+    # compiled once for every row (op by op, each row's scans compiled again)
+    params, memory = jax.jit(full_parameters), jax.jit(input_memory)
+    rate_and_play = jax.jit(_rate_and_play)
     for name, row in prep.rows:
-        p = full_parameters(row.theta0 + 0.3, row, case)
+        p = params(row.theta0 + 0.3, row, case)
         at = named(p, case)
         assert float(at("slide_jump")) == 0.0
         max_step, width, jump = at("rate") * case.dt, at("backlash"), at("slip_jump")
 
-        ref = _rate_and_play(vj, max_step, width, jump)
-        assert np.array_equal(np.asarray(input_memory(vj, p, case)), ref), name
+        ref = rate_and_play(vj, max_step, width, jump)
+        assert np.array_equal(np.asarray(memory(vj, p, case)), ref), name
     # a slide row at slide_jump = 0 is the plain play row of the same width
     slip = slot_index("slip_jump", N_MAX)
     he = next(r for n, r in prep.rows if n == "backlash" and r.free[slip])

@@ -152,7 +152,8 @@ def test_delay_frac_gradient_matches_finite_differences(getkey):
     row = _delay_row(prep)
     theta = jnp.asarray(row.theta0) + 0.1 * jr.normal(getkey(), row.theta0.shape)
     used = np.asarray(row.idx) < prep.arrays.anchor.shape[0]
-    f = lambda th: simulate_row(th, row, prep.arrays.v_est, prep.arrays)  # noqa: E731
+    # compiled once (op by op, every evaluation compiled its scans again)
+    f = jax.jit(lambda th: simulate_row(th, row, prep.arrays.v_est, prep.arrays))
     J = jax.jacfwd(f)(theta)
     eps = 1e-4
     for j in np.flatnonzero(used):

@@ -2,6 +2,7 @@
 
 import jax.tree_util as jtu
 import numpy as np
+from scipy import signal
 
 
 def tree_allclose(x, y, *, rtol=1e-10, atol=1e-12) -> bool:
@@ -193,3 +194,19 @@ def assert_normal_equations_match_differences(theta, row, case, slot, *, h=1e-6)
     np.testing.assert_allclose(g, J.T @ r0, rtol=1e-6, atol=1e-8 * np.abs(g).max())
     j = list(np.asarray(row.idx)).index(slot)
     assert np.abs(J[:, j]).max() > 1e-3
+
+
+def pi_loop(i: int, n: int = 2000):
+    """A first-order plant under PI control acting within the sample, setpoint
+    steps every 200 samples, a coloured output disturbance."""
+    rng = np.random.default_rng([12, i])
+    sp = np.repeat(rng.uniform(-1, 1, n // 200 + 1), 200)[:n]
+    d = signal.lfilter([1.0], [1.0, -0.95], 0.1 * rng.standard_normal(n))
+    v, y = np.zeros(n), np.zeros(n)
+    v_prev = e_prev = 0.0
+    for k in range(n):
+        y[k] = 0.8 * y[k - 1] + 0.2 * v[k - 1] if k else 0.0
+        e = sp[k] - (y[k] + d[k])
+        v[k] = v_prev + 0.8 * (e - e_prev) + 0.3 * e
+        v_prev, e_prev = v[k], e
+    return y + d, v

@@ -294,16 +294,20 @@ def _diagnose(args, cases: list, outs, blocks, quiet, verbose) -> int:
     """Diagnose the cases read (`(index, case, out)`), one `diagnose_many` call per
     block of `blocks` (`share`) padded as the whole run (`padding`), writing each
     case as soon as it is done; the number diagnosed."""
-    from ..diagnosis.nominal_fit import fit_nominal
+    from ..diagnosis.nominal_fit import fit_nominal_many
     from ..io import model_to_dict, write_json
 
+    # every nominal that hamjax fits itself, in one batch (`fit_nominal_many`)
+    unfitted = [(i, case) for i, case, _ in cases if case.model is None]
+    nominals = fit_nominal_many([(case.dt, case.estimation) for _, case in unfitted])
+    fitted = {i: plant for (i, _), plant in zip(unfitted, nominals, strict=True)}
     item, where, read = {}, {}, {}
     for i, case, out in cases:
         n = max(case.estimation["v"].shape[0], case.validation["v"].shape[0])
         read[args.cases[i]] = (case.model, n)  # as `_sizes` reads it
         plant = case.model
         if plant is None:
-            plant = fit_nominal(case.dt, case.estimation)
+            plant = fitted[i]
             write_json(out / "nominal_model.json", model_to_dict(plant, case.dt))
             source = FITTED
         else:

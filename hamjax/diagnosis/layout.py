@@ -203,7 +203,7 @@ def stick_slip_profile(
     return tuple((float(S), float(J), float(g), slot) for _, S, J, g, slot in kept)
 
 
-def _looks_closed_loop(y: np.ndarray, v: np.ndarray) -> bool:
+def looks_closed_loop(y: np.ndarray, v: np.ndarray) -> bool:
     """`residuals.feedback_test` of the measured output `y` against `v` (False
     where it does not apply: a periodic input, a short record). The output, not
     the nominal's residual: the test's level must not depend on the nominal
@@ -395,6 +395,7 @@ def prepare(
     *,
     nominal_uncertainty: float | None = None,
     fitted_nominal: bool = False,
+    profile: bool = True,
 ) -> Prepared:
     """Case arrays and candidate rows for `plant` and the two records (`t,v,y` dicts).
 
@@ -402,7 +403,10 @@ def prepare(
     of every re-fit (`prior_weight`); None for a negligible prior.
     `fitted_nominal`: `plant` is hamjax's own fit (`nominal_fit`, no model.json),
     so starts that re-fit its whole discrete linear block are offered
-    (`REFIT_LINEAR`; `n_free_parameters(..., fitted=True)` wide)."""
+    (`REFIT_LINEAR`; `n_free_parameters(..., fitted=True)` wide).
+    `profile=False` skips the stick-slip profile of a closed-loop record (the
+    backlash rows then start from their plain starts only): for a caller that
+    fits the re-fit row alone (`nominal_fit`)."""
     plant = fold_output_scale(plant)
     nom = describe_nominal(plant)
     n_est, n_val = est["v"].shape[0], val["v"].shape[0]
@@ -435,7 +439,7 @@ def prepare(
         stick_slip=stick_slip_profile(
             nom, plant.linear, dt, np.asarray(v), np.asarray(est["y"]), L
         )
-        if _looks_closed_loop(np.asarray(est["y"]), np.asarray(v))
+        if profile and looks_closed_loop(np.asarray(est["y"]), np.asarray(v))
         else (),
         t_dom=float(t_dom),
         refit_linear=bool(fitted_nominal and not nom.is_ct),
@@ -485,10 +489,14 @@ def prepare(
         # which the fit wanders and Levenberg-Marquardt crawls.
         refit = ["gain", *refit]
     # a `REFIT_LINEAR` start: numerator and denominator of the highest fitted
-    # order, the gain (which the numerator carries) and the map held at nominal
+    # order, the gain (which the numerator carries) and the map held at nominal;
+    # a strictly proper nominal (`nominal_fit` on a closed-loop record) keeps
+    # b0 = 0, the delay that makes the loop identifiable
     n_lin = max(FITTED_ORDER, len(den_free), nom.b.shape[0] - 1)
+    strictly_proper = not nom.is_ct and nom.b.shape[0] > 1 and nom.b[0] == 0.0
+    first_db = 1 if strictly_proper else 0
     refit_linear = [f"den{j + 1}" for j in range(n_lin)] + list(
-        numerator_slots(N_MAX)[: n_lin + 1]
+        numerator_slots(N_MAX)[first_db : n_lin + 1]
     )
     P = n_params or n_free_parameters(plant, fitted=ctx.refit_linear)
     # the re-fitted parameters that carry the sign of G F (`FLIP_SIGN`)

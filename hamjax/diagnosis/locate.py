@@ -202,7 +202,7 @@ def locate(t, v, r_before, r_after, u, floor, dt, *, y=None) -> dict:
     nominal model (`before`) and of the augmented model (`after`), and whether
     the record looks closed-loop: `residuals.feedback_test` on the measured
     output `y`, as the gate of the candidate layout tests it
-    (`layout._looks_closed_loop`): a model's residual is not a function of past
+    (`layout.looks_closed_loop`): a model's residual is not a function of past
     inputs alone when the model has a direct feedthrough, and its level would
     depend on the model being right. Without `y` the test is not run."""
     t, v, u = (np.asarray(x, float) for x in (t, v, u))

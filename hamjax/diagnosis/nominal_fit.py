@@ -2,7 +2,7 @@
 
 Structure (documented in the contract): a static map $F$, piecewise-linear
 (seed-001 Fig. 2 form, started at the identity) or the identity, followed by a
-discrete $B(q^{-1})/A(q^{-1})$ with $\\deg A = \\deg B = n$ ($b_0$ included);
+discrete $B(q^{-1})/A(q^{-1})$ with $\\deg A = \\deg B = n$ ($b_0$ included, but 0 on a closed-loop record);
 the map and $n \\in \\{1, 2, 3\\}$ are selected by BIC on the estimation record.
 Each order is started from the least-squares ARX fit with $F$ = identity and then
 refined by output-error least squares over the poles and either the six
@@ -10,6 +10,15 @@ piecewise-linear parameters or the gain (the numerator shape stays the ARX one).
 The identity map is what an input with only a few levels (two, in a step test)
 can determine; a piecewise-linear map there is not identifiable. Fits whose
 poles left the unit circle are not candidates.
+
+**Closed-loop records** (`layout.looks_closed_loop`: the output predicts the
+input beyond the input's own past) get $b_0 = 0$, one sample of delay at least:
+a controller acts within the sample ($v_k$ depends on $y_k$), so a direct term
+$b_0 v_k$ in the plant would let a fit explain $y_k$ by the controller's own law
+inverted, $y_k \approx -v_k / K_c$ (the loop is identifiable by the direct
+method only with a delay in it: Ljung, *System Identification*, 2nd ed.,
+§13.4), and a plant sampled behind a held input has no direct term anyway. The
+re-fit of the linear block keeps that $b_0 = 0$ (`layout.prepare`).
 
 Integrating plants (a level loop, a position axis) are candidates too:
 $B/(A\\,(1 - q^{-1}))$ with $\\deg A \\in \\{1, 2\\}$, the same map choices, fitted
@@ -21,16 +30,21 @@ candidate's output-error SSE is that error already; only the integrating ones,
 and a map whose dead zone had to be clipped, are simulated again).
 """
 
+from collections.abc import Sequence
+
+import jax
 import jax.tree_util as jtu
 import numpy as np
 
 from ..models import DiscreteTransferFunction, Hammerstein, Identity, PiecewiseLinear
 from .augmented import slot_names
-from .fit import fit_rows
+from .fit import LAMBDA0, fit_batch, fit_rows
 from .layout import (
     FITTED_ORDER,
     MAX_EFFECT_SLOTS,
     N_MAX,
+    bucket,
+    looks_closed_loop,
     nominal_output,
     prepare,
 )
@@ -43,37 +57,46 @@ INTEGRATING_ORDERS = (1, 2)
 NOMINAL_STEPS = 100  # Levenberg-Marquardt budget of each nominal fit
 
 
-def _arx(v: np.ndarray, y: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+def _arx(
+    v: np.ndarray, y: np.ndarray, n: int, *, direct: bool = True
+) -> tuple[np.ndarray, np.ndarray]:
+    """Least-squares ARX fit of order `n`: `(b, a)`, $b_0$ fitted if `direct`, else
+    exactly 0 (a strictly proper block)."""
+    first = 0 if direct else 1
     rows = []
     for k in range(n, v.shape[0]):
-        rows.append(np.r_[-y[k - n : k][::-1], v[k - n : k + 1][::-1]])
+        rows.append(np.r_[-y[k - n : k][::-1], v[k - n : k + 1 - first][::-1]])
     X = np.asarray(rows)
     theta, *_ = np.linalg.lstsq(X, y[n:], rcond=None)
     a = np.r_[1.0, theta[:n]]
-    b = theta[n:]
+    b = np.r_[np.zeros(first), theta[n:]]
     # keep the start stable: reflect unstable roots inside the unit circle
     roots = np.roots(a)
     roots = np.where(np.abs(roots) >= 0.999, 0.98 / np.conj(roots), roots)
     return b, np.real(np.poly(roots))
 
 
-def _fit_structure(dt, record, nl, b, a, n_params):
-    """Output-error fit of `nl` then `B/A` (started at `b, a`) on `record`: the
-    fitted static map, the discrete block, the parameter count, and the fit's SSE
-    on `record` when it is that of the returned model (None where the map's
-    dead zone was clipped to d1 >= 0 >= d2, or the fit did not see every sample)."""
-    names = slot_names(N_MAX)
+def _prepare_structure(dt, record, nl, b, a, n_params, length=None):
+    """The re-fit row (`parameter_mismatch`) of `nl` then `B/A` on `record`, and
+    its prepared case (`layout.prepare`, padded to `length`)."""
     start = Hammerstein(nl, DiscreteTransferFunction(b, a, dt))
-    prep = prepare(start, dt, record, record, n_params=n_params)
-    rows = [r for name, r in prep.rows if name == "parameter_mismatch"]
-    stacked = jtu.tree_map(lambda *x: np.stack(x), *rows)
-    fit = fit_rows(stacked, prep.arrays, NOMINAL_STEPS)
-    p = np.asarray(fit.params[0])
+    prep = prepare(start, dt, record, record, length, n_params, profile=False)
+    row = next(r for name, r in prep.rows if name == "parameter_mismatch")
+    return prep, row
+
+
+def _read_structure(prep, p, sse, record, nl, b, a):
+    """The fitted static map, the discrete block, the parameter count, and the
+    fit's SSE on `record` when it is that of the returned model (None where the
+    map's dead zone was clipped to d1 >= 0 >= d2, or the fit did not see every
+    sample), from the fitted physical parameters `p` and SSE `sse`."""
+    names = slot_names(N_MAX)
+    p = np.asarray(p)
     n = a.shape[0] - 1
     den = np.r_[1.0, [p[names.index(f"den{j}")] for j in range(1, n + 1)]]
     gain = p[names.index("gain")]  # 1 beside a piecewise-linear map
     fitted = Identity()
-    sse = float(fit.sse_est[0])
+    sse = float(sse)
     exact = np.isfinite(sse) and np.sum(prep.arrays.m_est) == record["v"].shape[0]
     if isinstance(nl, PiecewiseLinear):
         vals = {
@@ -86,48 +109,104 @@ def _fit_structure(dt, record, nl, b, a, n_params):
     return fitted, gain * b, den, k, (sse if exact else None)
 
 
+def _fit_structure(dt, record, nl, b, a, n_params):
+    """Output-error fit of `nl` then `B/A` (started at `b, a`) on `record` alone
+    (`_read_structure`'s tuple); `fit_nominal_many` fits every structure of
+    every case in one batch instead."""
+    prep, row = _prepare_structure(dt, record, nl, b, a, n_params)
+    stacked = jtu.tree_map(lambda x: np.asarray(x)[None], row)
+    fit = fit_rows(stacked, prep.arrays, NOMINAL_STEPS)
+    return _read_structure(prep, fit.params[0], fit.sse_est[0], record, nl, b, a)
+
+
 def _simulated_sse(plant: Hammerstein, record: dict, dt: float) -> float:
     return float(
         np.sum(np.square(record["y"] - nominal_output(plant, record["v"], dt)))
     )
 
 
-def fit_nominal(dt: float, estimation: dict) -> Hammerstein:
-    """Fit the default nominal structure on the estimation record (see module doc)."""
+def _structures(dt: float, estimation: dict):
+    """Every candidate structure of a record: `(integrating, record, nl, b, a)`,
+    started from the ARX fit of its order (`direct` per `looks_closed_loop`)."""
     v, y = estimation["v"], estimation["y"]
-    n_samples = v.shape[0]
-    best, best_bic = None, np.inf
-    n_params = N_MAX + 6 + MAX_EFFECT_SLOTS  # one row shape: one compilation
+    direct = not looks_closed_loop(np.asarray(y), np.asarray(v))
     # the increments of y (from rest: y[-1] = 0) for the integrating structures
     increments = {**estimation, "y": np.diff(y, prepend=0.0)}
+    out = []
     for integrating, orders in ((False, ORDERS), (True, INTEGRATING_ORDERS)):
         record = increments if integrating else estimation
         for n in orders:
-            b, a = _arx(v, record["y"], n)
+            b, a = _arx(v, record["y"], n, direct=direct)
             for nl in (PiecewiseLinear(k1=1.0, k2=1.0), Identity()):
-                fitted, b_fit, den, k, sse = _fit_structure(
-                    dt, record, nl, b, a, n_params
-                )
-                if not (np.all(np.isfinite(den)) and np.all(np.isfinite(b_fit))):
-                    continue
-                # the output-error fit does not constrain the poles: an unstable
-                # block fits the estimation record and diverges on any other
-                if not DiscreteTransferFunction(b_fit, den, dt).is_stable():
-                    continue
-                if integrating:  # the integrator 1/(1 - q^-1), fixed
-                    den = np.convolve(den, [1.0, -1.0])
-                    b_fit = np.r_[b_fit, 0.0]
-                plant = Hammerstein(fitted, DiscreteTransferFunction(b_fit, den, dt))
-                # a stable candidate's fit SSE is already its simulated SSE on
-                # y (same model, same record, from rest); an integrating one was
-                # fitted on the increments, so it is simulated on y here
-                if integrating or sse is None:
-                    sse = _simulated_sse(plant, estimation, dt)
-                bic = n_samples * np.log(max(sse, 1e-300) / n_samples) + k * np.log(
-                    n_samples
-                )
-                if np.isfinite(bic) and bic < best_bic:
-                    best, best_bic = plant, bic
+                out.append((integrating, record, nl, b, a))
+    return out, direct
+
+
+def _select(dt, estimation, structures, fitted_structures, direct) -> Hammerstein:
+    """The candidate of least BIC on the simulated estimation output."""
+    v, y = estimation["v"], estimation["y"]
+    n_samples = v.shape[0]
+    best, best_bic = None, np.inf
+    for (integrating, *_), got in zip(structures, fitted_structures, strict=True):
+        fitted, b_fit, den, k, sse = got
+        if not (np.all(np.isfinite(den)) and np.all(np.isfinite(b_fit))):
+            continue
+        # the output-error fit does not constrain the poles: an unstable
+        # block fits the estimation record and diverges on any other
+        if not DiscreteTransferFunction(b_fit, den, dt).is_stable():
+            continue
+        if integrating:  # the integrator 1/(1 - q^-1), fixed
+            den = np.convolve(den, [1.0, -1.0])
+            b_fit = np.r_[b_fit, 0.0]
+        plant = Hammerstein(fitted, DiscreteTransferFunction(b_fit, den, dt))
+        # a stable candidate's fit SSE is already its simulated SSE on
+        # y (same model, same record, from rest); an integrating one was
+        # fitted on the increments, so it is simulated on y here
+        if integrating or sse is None:
+            sse = _simulated_sse(plant, estimation, dt)
+        bic = n_samples * np.log(max(sse, 1e-300) / n_samples) + k * np.log(n_samples)
+        if np.isfinite(bic) and bic < best_bic:
+            best, best_bic = plant, bic
     if best is None:
-        return Hammerstein(Identity(), DiscreteTransferFunction(*_arx(v, y, 1), dt))
+        b, a = _arx(v, y, 1, direct=direct)
+        return Hammerstein(Identity(), DiscreteTransferFunction(b, a, dt))
     return best
+
+
+def fit_nominal_many(cases: Sequence[tuple[float, dict]]) -> list[Hammerstein]:
+    """`fit_nominal` of each `(dt, estimation)`: every candidate structure of
+    every case fitted in one batch (`fit.fit_batch`, split over the devices;
+    records padded to a common length, which changes only rounding), so a call
+    with many cases compiles once and runs the fits side by side."""
+    n_params = N_MAX + 6 + MAX_EFFECT_SLOTS  # one row shape: one compilation
+    per_case = [_structures(dt, est) for dt, est in cases]
+    length = max((bucket(est["v"].shape[0]) for _, est in cases), default=0)
+    jobs = []  # (case, prep, row)
+    for c, ((dt, _), (structures, _)) in enumerate(zip(cases, per_case, strict=True)):
+        for _, record, nl, b, a in structures:
+            prep, row = _prepare_structure(dt, record, nl, b, a, n_params, length)
+            jobs.append((c, prep, row))
+    if not jobs:
+        return []
+    n_dev = jax.local_device_count()
+    pad = (-len(jobs)) % n_dev  # whole rows per device: repeat the last
+    todo = jobs + [jobs[-1]] * pad
+    rows = jtu.tree_map(lambda *x: np.stack(x), *(r for _, _, r in todo))
+    arrays = jtu.tree_map(lambda *x: np.stack(x), *(p.arrays for _, p, _ in todo))
+    n = len(todo)
+    fit = fit_batch(rows, arrays, np.full(n, NOMINAL_STEPS), np.full(n, LAMBDA0))
+    params, sse = np.asarray(fit.params), np.asarray(fit.sse_est)
+    out, j = [], 0
+    for (dt, est), (structures, direct) in zip(cases, per_case, strict=True):
+        got = []
+        for _, record, nl, b, a in structures:
+            prep = jobs[j][1]
+            got.append(_read_structure(prep, params[j], sse[j], record, nl, b, a))
+            j += 1
+        out.append(_select(dt, est, structures, got, direct))
+    return out
+
+
+def fit_nominal(dt: float, estimation: dict) -> Hammerstein:
+    """Fit the default nominal structure on the estimation record (see module doc)."""
+    return fit_nominal_many([(dt, estimation)])[0]

@@ -6,6 +6,7 @@ import json
 
 import numpy as np
 import pytest
+from helpers import pi_loop
 from scipy import signal, stats
 
 from hamjax.cli.main import main
@@ -48,22 +49,6 @@ def _open_loop_model_error(i: int, n: int = 1000):
     return y + noise + 0.005 * rng.standard_normal(n), v
 
 
-def _pi_loop(i: int, n: int = 2000):
-    """A first-order plant under PI control acting within the sample, setpoint
-    steps every 200 samples, a coloured output disturbance."""
-    rng = np.random.default_rng([12, i])
-    sp = np.repeat(rng.uniform(-1, 1, n // 200 + 1), 200)[:n]
-    d = signal.lfilter([1.0], [1.0, -0.95], 0.1 * rng.standard_normal(n))
-    v, y = np.zeros(n), np.zeros(n)
-    v_prev = e_prev = 0.0
-    for k in range(n):
-        y[k] = 0.8 * y[k - 1] + 0.2 * v[k - 1] if k else 0.0
-        e = sp[k] - (y[k] + d[k])
-        v[k] = v_prev + 0.8 * (e - e_prev) + 0.3 * e
-        v_prev, e_prev = v[k], e
-    return y + d, v
-
-
 def test_false_alarm_rate_on_open_loop_records_is_the_stated_level():
     # the level is FEEDBACK_ALPHA (F reference of the cluster-robust Wald test);
     # the count of m independent records exceeds the binomial 99.5 % quantile at
@@ -79,7 +64,7 @@ def test_longest_hold():
 
 
 def test_a_pi_loop_is_seen_closed():
-    results = [feedback_test(*_pi_loop(i)) for i in range(20)]
+    results = [feedback_test(*pi_loop(i)) for i in range(20)]
     assert all(r["applicable"] and r["closed_loop"] for r in results)
     # the controller reads y_k and y_{k-1}: far beyond the 1 % level, every draw
     assert all(r["p_value"] < 1e-6 for r in results)
@@ -137,7 +122,7 @@ def test_a_sticky_valve_under_a_drifting_load_keeps_its_name(tmp_path, capsys):
 
 def test_a_periodic_input_is_not_tested():
     # its future is its past: the test refuses it itself (no caller's guard)
-    y, v = _pi_loop(0)
+    y, v = pi_loop(0)
     period = 250
     v_periodic = np.tile(v[:period], v.shape[0] // period)
     out = feedback_test(y[: v_periodic.shape[0]], v_periodic)
@@ -148,15 +133,15 @@ def test_a_periodic_input_is_not_tested():
 
 
 def test_locate_tests_the_measured_output_as_the_layout_gate_does():
-    from hamjax.diagnosis.layout import _looks_closed_loop
+    from hamjax.diagnosis.layout import looks_closed_loop
     from hamjax.diagnosis.locate import locate
 
-    y, v = _pi_loop(3)
+    y, v = pi_loop(3)
     t = np.arange(v.shape[0]) * 0.1
     # a residual that is white noise, independent of the loop: a test on it
     # would see no feedback; the test on y must (p < 1e-6 on every PI draw above)
     r = np.random.default_rng([13, 0]).standard_normal(v.shape[0])
     where = locate(t, v, r, r, v, 1.0, 0.1, y=y)
     assert where["feedback"] == feedback_test(y, v)
-    assert where["feedback"]["closed_loop"] and _looks_closed_loop(y, v)
+    assert where["feedback"]["closed_loop"] and looks_closed_loop(y, v)
     assert not feedback_test(r, v)["closed_loop"]

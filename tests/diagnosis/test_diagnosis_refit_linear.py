@@ -81,6 +81,23 @@ def test_row_offered_only_for_a_fitted_discrete_nominal(getkey):
     assert free[1] == dens | nums | {"out_off"}
 
 
+def test_a_strictly_proper_nominal_keeps_its_zero_b0(getkey):
+    # `fit_nominal` gives a closed-loop record b0 = 0 (the loop's delay); the
+    # linear re-fit must keep it there: db0 held, db1.. free as before
+    est, val = _records(getkey())
+    names = hj.diagnosis.augmented.slot_names(N_MAX)
+    for b, freed in (([0.0, 0.3, 0.15], False), ([0.1, 0.3, 0.15], True)):
+        plant = hj.Hammerstein(hj.Identity(), hj.DiscreteTransferFunction(b, A, DT))
+        prep = prepare(
+            plant, DT, est, val, n_params=_fitted_n_params(), fitted_nominal=True
+        )
+        rows = [np.asarray(r.free) for _, r in prep.rows if refits_linear(r)]
+        assert len(rows) == 2
+        for free in rows:
+            assert bool(free[names.index("db0")]) is freed
+            assert free[names.index("db1")] and free[names.index("db2")]
+
+
 def test_row_at_neutral_is_the_nominal(getkey):
     est, val = _records(getkey())
     plant = fit_nominal(DT, est)

@@ -52,7 +52,7 @@ def select_cases(names: list[str], spec: str) -> list[str]:
 def run(key, *, realisations, chunk, out, quiet, args) -> dict:
     from ....diagnosis.case import read_case
     from ....diagnosis.diagnose import diagnose_many
-    from ....diagnosis.nominal_fit import fit_nominal
+    from ....diagnosis.nominal_fit import fit_nominal_many
     from ....diagnosis.report import where_in_brief, write_diagnosis
     from ....io import atomic_write_text, model_to_dict, write_json
     from ..real_data import write_real_cases
@@ -63,19 +63,21 @@ def run(key, *, realisations, chunk, out, quiet, args) -> dict:
     notes = write_real_cases(opts.data, out / "cases", stiction_loops=realisations)
     names = select_cases(sorted(notes), opts.cases)
     start = time.perf_counter()
-    items, kept, skipped = [], [], {}
+    read, skipped = {}, {}
     for n in names:
         try:  # a record the diagnosis refuses is reported, not fatal
-            c = read_case(out / "cases" / n)
-            plant = fit_nominal(c.dt, c.estimation)
+            read[n] = read_case(out / "cases" / n)
         except ValueError as err:
             skipped[n] = str(err)
-            continue
+    kept = list(read)
+    nominals = fit_nominal_many([(c.dt, c.estimation) for c in read.values()])
+    items = []
+    for n, plant in zip(kept, nominals, strict=True):
+        c = read[n]
         write_json(
             out / "results" / n / "nominal_model.json", model_to_dict(plant, c.dt)
         )
         items.append((plant, c.dt, c.estimation, c.validation))
-        kept.append(n)
     res = diagnose_many(items, cases_per_batch=chunk, fitted=[True] * len(items))
     rows = [
         "| case | effect named (p) | gap before | gap after | noise floor | "

@@ -2,8 +2,9 @@
 
 Structure (documented in the contract): a static map $F$, piecewise-linear
 (seed-001 Fig. 2 form, started at the identity) or the identity, followed by a
-discrete $B(q^{-1})/A(q^{-1})$ with $\\deg A = \\deg B = n$ ($b_0$ included, but 0 on a closed-loop record);
-the map and $n \\in \\{1, 2, 3\\}$ are selected by BIC on the estimation record.
+discrete $B(q^{-1})/A(q^{-1})$ with $\\deg A = \\deg B = n$ ($b_0$ included,
+but 0 on a closed-loop record); the map and $n \\in \\{1, 2, 3\\}$ are selected
+by BIC on the estimation record.
 Each order is started from the least-squares ARX fit with $F$ = identity and then
 refined by output-error least squares over the poles and either the six
 piecewise-linear parameters or the gain (the numerator shape stays the ARX one).
@@ -15,10 +16,13 @@ poles left the unit circle are not candidates.
 input beyond the input's own past) get $b_0 = 0$, one sample of delay at least:
 a controller acts within the sample ($v_k$ depends on $y_k$), so a direct term
 $b_0 v_k$ in the plant would let a fit explain $y_k$ by the controller's own law
-inverted, $y_k \approx -v_k / K_c$ (the loop is identifiable by the direct
+inverted, $y_k \\approx -v_k / K_c$ (the loop is identifiable by the direct
 method only with a delay in it: Ljung, *System Identification*, 2nd ed.,
 §13.4), and a plant sampled behind a held input has no direct term anyway. The
-re-fit of the linear block keeps that $b_0 = 0$ (`layout.prepare`).
+re-fit of the linear block keeps that $b_0 = 0$ (`layout.prepare`). There the
+input is correlated with the noise, so an output-error fit to $y$ is biased;
+each structure is fitted instead to `loop_response`, the response of a
+high-order ARX model (consistent), and scored on the measured $y$.
 
 Integrating plants (a level loop, a position axis) are candidates too:
 $B/(A\\,(1 - q^{-1}))$ with $\\deg A \\in \\{1, 2\\}$, the same map choices, fitted
@@ -36,6 +40,7 @@ import jax
 import jax.tree_util as jtu
 import numpy as np
 
+from .._filters import lfilter_numpy
 from ..models import DiscreteTransferFunction, Hammerstein, Identity, PiecewiseLinear
 from .augmented import slot_names
 from .fit import LAMBDA0, fit_batch, fit_rows
@@ -55,21 +60,31 @@ ORDERS = tuple(range(1, FITTED_ORDER + 1))
 # loops and position axes (the whole block stays within the diagnosis's N_MAX)
 INTEGRATING_ORDERS = (1, 2)
 NOMINAL_STEPS = 100  # Levenberg-Marquardt budget of each nominal fit
+# highest order of `loop_response`'s ARX model (chosen by BIC below it; a cap on
+# the cost, with at most a twentieth of the record as its other bound)
+HIGH_ORDER = 20
+
+
+def _arx_lstsq(
+    v: np.ndarray, y: np.ndarray, n: int, *, direct: bool = True
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """Least-squares ARX fit of order `n`: `(b, a, sse)` (one-step errors on
+    samples `n..`), $b_0$ fitted if `direct`, else exactly 0 (strictly proper)."""
+    first = 0 if direct else 1
+    N = v.shape[0]
+    cols = [-y[n - i : N - i] for i in range(1, n + 1)]
+    cols += [v[n - i : N - i] for i in range(first, n + 1)]
+    X = np.column_stack(cols)
+    theta, *_ = np.linalg.lstsq(X, y[n:], rcond=None)
+    sse = float(np.sum(np.square(y[n:] - X @ theta)))
+    return np.r_[np.zeros(first), theta[n:]], np.r_[1.0, theta[:n]], sse
 
 
 def _arx(
     v: np.ndarray, y: np.ndarray, n: int, *, direct: bool = True
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Least-squares ARX fit of order `n`: `(b, a)`, $b_0$ fitted if `direct`, else
-    exactly 0 (a strictly proper block)."""
-    first = 0 if direct else 1
-    rows = []
-    for k in range(n, v.shape[0]):
-        rows.append(np.r_[-y[k - n : k][::-1], v[k - n : k + 1 - first][::-1]])
-    X = np.asarray(rows)
-    theta, *_ = np.linalg.lstsq(X, y[n:], rcond=None)
-    a = np.r_[1.0, theta[:n]]
-    b = np.r_[np.zeros(first), theta[n:]]
+    """`_arx_lstsq`'s `(b, a)`, its unstable roots reflected (a start)."""
+    b, a, _ = _arx_lstsq(v, y, n, direct=direct)
     # keep the start stable: reflect unstable roots inside the unit circle
     roots = np.roots(a)
     roots = np.where(np.abs(roots) >= 0.999, 0.98 / np.conj(roots), roots)
@@ -125,11 +140,44 @@ def _simulated_sse(plant: Hammerstein, record: dict, dt: float) -> float:
     )
 
 
+def loop_response(v: np.ndarray, y: np.ndarray) -> np.ndarray | None:
+    """Stage 1 of a closed-loop nominal: the noise-free response to `v`, from
+    rest, of the strictly proper ARX model of the order (1 to `HIGH_ORDER`, at
+    most a twentieth of the record) of least BIC on its one-step errors, $N \\ln
+    (S/N) + 2 n \\ln N$; None where no order is stable.
+
+    In closed loop the input is correlated with the noise: an output-error fit
+    (a white noise model) is biased there, while a prediction-error fit whose
+    noise model can be right is not (Ljung, *System Identification*, 2nd ed.,
+    §13.4). ARX's noise model is $1/A$, so a high order makes it flexible enough
+    and its $B/A$ consistent; the low-order nominal is then fitted by output
+    error to this response (the model reduction of Zhu's asymptotic method, Zhu
+    1998), not to the measured output."""
+    N = v.shape[0]
+    best, best_bic = None, np.inf
+    for n in range(1, min(HIGH_ORDER, N // 20) + 1):
+        b, a, sse = _arx_lstsq(v, y, n, direct=False)
+        m = N - n
+        bic = m * np.log(max(sse, 1e-300) / m) + 2 * n * np.log(m)
+        stable = np.all(np.abs(np.roots(a)) < 1.0)
+        if stable and np.isfinite(bic) and bic < best_bic:
+            best, best_bic = (b, a), bic
+    if best is None:
+        return None
+    return lfilter_numpy(*best, np.asarray(v, float))
+
+
 def _structures(dt: float, estimation: dict):
     """Every candidate structure of a record: `(integrating, record, nl, b, a)`,
-    started from the ARX fit of its order (`direct` per `looks_closed_loop`)."""
+    started from the ARX fit of its order (`direct` per `looks_closed_loop`); on
+    a closed-loop record each is fitted to `loop_response` instead of $y$."""
     v, y = estimation["v"], estimation["y"]
     direct = not looks_closed_loop(np.asarray(y), np.asarray(v))
+    if not direct:
+        target = loop_response(np.asarray(v, float), np.asarray(y, float))
+        if target is not None:
+            estimation = {**estimation, "y": target}
+            y = target
     # the increments of y (from rest: y[-1] = 0) for the integrating structures
     increments = {**estimation, "y": np.diff(y, prepend=0.0)}
     out = []
@@ -161,8 +209,9 @@ def _select(dt, estimation, structures, fitted_structures, direct) -> Hammerstei
         plant = Hammerstein(fitted, DiscreteTransferFunction(b_fit, den, dt))
         # a stable candidate's fit SSE is already its simulated SSE on
         # y (same model, same record, from rest); an integrating one was
-        # fitted on the increments, so it is simulated on y here
-        if integrating or sse is None:
+        # fitted on the increments, and a closed loop's on `loop_response`,
+        # so they are simulated on the measured y here
+        if integrating or sse is None or not direct:
             sse = _simulated_sse(plant, estimation, dt)
         bic = n_samples * np.log(max(sse, 1e-300) / n_samples) + k * np.log(n_samples)
         if np.isfinite(bic) and bic < best_bic:

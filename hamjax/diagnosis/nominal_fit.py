@@ -223,37 +223,39 @@ def _select(dt, estimation, structures, fitted_structures, direct) -> Hammerstei
 
 
 def fit_nominal_many(cases: Sequence[tuple[float, dict]]) -> list[Hammerstein]:
-    """`fit_nominal` of each `(dt, estimation)`: every candidate structure of
-    every case fitted in one batch (`fit.fit_batch`, split over the devices;
-    records padded to a common length, which changes only rounding), so a call
-    with many cases compiles once and runs the fits side by side."""
+    """`fit_nominal` of each `(dt, estimation)`: every candidate structure of the
+    cases whose records share a padded length (`layout.bucket`) fitted in one
+    batch (`fit.fit_batch`, split over the devices; padding changes only
+    rounding), so a call with many cases compiles once per length and runs the
+    fits side by side."""
     n_params = N_MAX + 6 + MAX_EFFECT_SLOTS  # one row shape: one compilation
     per_case = [_structures(dt, est) for dt, est in cases]
-    length = max((bucket(est["v"].shape[0]) for _, est in cases), default=0)
-    jobs = []  # (case, prep, row)
-    for c, ((dt, _), (structures, _)) in enumerate(zip(cases, per_case, strict=True)):
-        for _, record, nl, b, a in structures:
-            prep, row = _prepare_structure(dt, record, nl, b, a, n_params, length)
-            jobs.append((c, prep, row))
-    if not jobs:
-        return []
-    n_dev = jax.local_device_count()
-    pad = (-len(jobs)) % n_dev  # whole rows per device: repeat the last
-    todo = jobs + [jobs[-1]] * pad
-    rows = jtu.tree_map(lambda *x: np.stack(x), *(r for _, _, r in todo))
-    arrays = jtu.tree_map(lambda *x: np.stack(x), *(p.arrays for _, p, _ in todo))
-    n = len(todo)
-    fit = fit_batch(rows, arrays, np.full(n, NOMINAL_STEPS), np.full(n, LAMBDA0))
-    params, sse = np.asarray(fit.params), np.asarray(fit.sse_est)
-    out, j = [], 0
-    for (dt, est), (structures, direct) in zip(cases, per_case, strict=True):
-        got = []
-        for _, record, nl, b, a in structures:
-            prep = jobs[j][1]
-            got.append(_read_structure(prep, params[j], sse[j], record, nl, b, a))
-            j += 1
-        out.append(_select(dt, est, structures, got, direct))
-    return out
+    fitted: dict[int, list] = {}
+    lengths = [bucket(est["v"].shape[0]) for _, est in cases]
+    for length in sorted(set(lengths)):
+        members = [c for c, n in enumerate(lengths) if n == length]
+        jobs = []  # (case, prep, row, structure)
+        for c in members:
+            for structure in per_case[c][0]:
+                _, record, nl, b, a = structure
+                prep, row = _prepare_structure(
+                    cases[c][0], record, nl, b, a, n_params, length
+                )
+                jobs.append((c, prep, row, structure))
+        pad = (-len(jobs)) % jax.local_device_count()  # whole rows per device
+        todo = jobs + [jobs[-1]] * pad
+        rows = jtu.tree_map(lambda *x: np.stack(x), *(job[2] for job in todo))
+        arrays = jtu.tree_map(lambda *x: np.stack(x), *(job[1].arrays for job in todo))
+        n = len(todo)
+        fit = fit_batch(rows, arrays, np.full(n, NOMINAL_STEPS), np.full(n, LAMBDA0))
+        params, sse = np.asarray(fit.params), np.asarray(fit.sse_est)
+        for j, (c, prep, _, (_, record, nl, b, a)) in enumerate(jobs):
+            got = _read_structure(prep, params[j], sse[j], record, nl, b, a)
+            fitted.setdefault(c, []).append(got)
+    return [
+        _select(dt, est, per_case[c][0], fitted[c], per_case[c][1])
+        for c, (dt, est) in enumerate(cases)
+    ]
 
 
 def fit_nominal(dt: float, estimation: dict) -> Hammerstein:

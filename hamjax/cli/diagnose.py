@@ -299,6 +299,12 @@ def _diagnose(args, cases: list, outs, blocks, quiet, verbose) -> int:
 
     # every nominal that hamjax fits itself, in one batch (`fit_nominal_many`)
     unfitted = [(i, case) for i, case, _ in cases if case.model is None]
+    if unfitted and not quiet:
+        print(
+            f"fitting the nominal model of {len(unfitted)} case(s) without "
+            "model.json ...",
+            file=sys.stderr,
+        )
     nominals = fit_nominal_many([(case.dt, case.estimation) for _, case in unfitted])
     fitted = {i: plant for (i, _), plant in zip(unfitted, nominals, strict=True)}
     item, where, read = {}, {}, {}

@@ -490,11 +490,11 @@ def prepare(
         refit = ["gain", *refit]
     # a `REFIT_LINEAR` start: numerator and denominator of the highest fitted
     # order, the gain (which the numerator carries) and the map held at nominal;
-    # a strictly proper nominal (`nominal_fit` on a closed-loop record) keeps
-    # b0 = 0, the delay that makes the loop identifiable
+    # the nominal's delay, its numerator's leading zeros, stays (`nominal_fit`
+    # gives a closed-loop record b0 = 0, the delay that makes it identifiable)
     n_lin = max(FITTED_ORDER, len(den_free), nom.b.shape[0] - 1)
-    strictly_proper = not nom.is_ct and nom.b.shape[0] > 1 and nom.b[0] == 0.0
-    first_db = 1 if strictly_proper else 0
+    nonzero = np.flatnonzero(nom.b)
+    first_db = int(nonzero[0]) if not nom.is_ct and nonzero.size else 0
     refit_linear = [f"den{j + 1}" for j in range(n_lin)] + list(
         numerator_slots(N_MAX)[first_db : n_lin + 1]
     )

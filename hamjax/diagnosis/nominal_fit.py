@@ -43,7 +43,7 @@ import numpy as np
 from .._filters import lfilter_numpy
 from ..models import DiscreteTransferFunction, Hammerstein, Identity, PiecewiseLinear
 from .augmented import slot_names
-from .fit import LAMBDA0, fit_batch, fit_rows
+from .fit import LAMBDA0, fit_batch
 from .layout import (
     FITTED_ORDER,
     MAX_EFFECT_SLOTS,
@@ -122,16 +122,6 @@ def _read_structure(prep, p, sse, record, nl, b, a):
         fitted = PiecewiseLinear(**vals)
     k = (6 if isinstance(nl, PiecewiseLinear) else 1) + n + 1
     return fitted, gain * b, den, k, (sse if exact else None)
-
-
-def _fit_structure(dt, record, nl, b, a, n_params):
-    """Output-error fit of `nl` then `B/A` (started at `b, a`) on `record` alone
-    (`_read_structure`'s tuple); `fit_nominal_many` fits every structure of
-    every case in one batch instead."""
-    prep, row = _prepare_structure(dt, record, nl, b, a, n_params)
-    stacked = jtu.tree_map(lambda x: np.asarray(x)[None], row)
-    fit = fit_rows(stacked, prep.arrays, NOMINAL_STEPS)
-    return _read_structure(prep, fit.params[0], fit.sse_est[0], record, nl, b, a)
 
 
 def _simulated_sse(plant: Hammerstein, record: dict, dt: float) -> float:
@@ -222,36 +212,51 @@ def _select(dt, estimation, structures, fitted_structures, direct) -> Hammerstei
     return best
 
 
+N_PARAMS = N_MAX + 6 + MAX_EFFECT_SLOTS  # one row shape: one compilation
+
+
+def _fit_structures(jobs: list, length: int) -> list:
+    """Output-error fits of `jobs`, `(dt, record, nl, b, a)` each (`nl` then
+    `B/A` started at `b, a` on `record`), all padded to `length` and fitted in one
+    batch (`fit.fit_batch`, split over the devices): `_read_structure`'s tuple
+    for each."""
+    prepared = [
+        _prepare_structure(dt, record, nl, b, a, N_PARAMS, length)
+        for dt, record, nl, b, a in jobs
+    ]
+    pad = (-len(prepared)) % jax.local_device_count()  # whole rows per device
+    todo = prepared + [prepared[-1]] * pad
+    rows = jtu.tree_map(lambda *x: np.stack(x), *(row for _, row in todo))
+    arrays = jtu.tree_map(lambda *x: np.stack(x), *(prep.arrays for prep, _ in todo))
+    n = len(todo)
+    fit = fit_batch(rows, arrays, np.full(n, NOMINAL_STEPS), np.full(n, LAMBDA0))
+    params, sse = np.asarray(fit.params), np.asarray(fit.sse_est)
+    return [
+        _read_structure(prep, params[j], sse[j], record, nl, b, a)
+        for j, ((prep, _), (_, record, nl, b, a)) in enumerate(
+            zip(prepared, jobs, strict=True)
+        )
+    ]
+
+
 def fit_nominal_many(cases: Sequence[tuple[float, dict]]) -> list[Hammerstein]:
     """`fit_nominal` of each `(dt, estimation)`: every candidate structure of the
     cases whose records share a padded length (`layout.bucket`) fitted in one
-    batch (`fit.fit_batch`, split over the devices; padding changes only
-    rounding), so a call with many cases compiles once per length and runs the
-    fits side by side."""
-    n_params = N_MAX + 6 + MAX_EFFECT_SLOTS  # one row shape: one compilation
+    batch (`_fit_structures`; padding changes only rounding), so a call with
+    many cases compiles once per length and runs the fits side by side."""
     per_case = [_structures(dt, est) for dt, est in cases]
     fitted: dict[int, list] = {}
     lengths = [bucket(est["v"].shape[0]) for _, est in cases]
     for length in sorted(set(lengths)):
         members = [c for c, n in enumerate(lengths) if n == length]
-        jobs = []  # (case, prep, row, structure)
+        jobs = [
+            (cases[c][0], *structure[1:])
+            for c in members
+            for structure in per_case[c][0]
+        ]
+        got = iter(_fit_structures(jobs, length))
         for c in members:
-            for structure in per_case[c][0]:
-                _, record, nl, b, a = structure
-                prep, row = _prepare_structure(
-                    cases[c][0], record, nl, b, a, n_params, length
-                )
-                jobs.append((c, prep, row, structure))
-        pad = (-len(jobs)) % jax.local_device_count()  # whole rows per device
-        todo = jobs + [jobs[-1]] * pad
-        rows = jtu.tree_map(lambda *x: np.stack(x), *(job[2] for job in todo))
-        arrays = jtu.tree_map(lambda *x: np.stack(x), *(job[1].arrays for job in todo))
-        n = len(todo)
-        fit = fit_batch(rows, arrays, np.full(n, NOMINAL_STEPS), np.full(n, LAMBDA0))
-        params, sse = np.asarray(fit.params), np.asarray(fit.sse_est)
-        for j, (c, prep, _, (_, record, nl, b, a)) in enumerate(jobs):
-            got = _read_structure(prep, params[j], sse[j], record, nl, b, a)
-            fitted.setdefault(c, []).append(got)
+            fitted[c] = [next(got) for _ in per_case[c][0]]
     return [
         _select(dt, est, per_case[c][0], fitted[c], per_case[c][1])
         for c, (dt, est) in enumerate(cases)

@@ -107,7 +107,7 @@ def test_stable_candidates_are_scored_by_their_fit_sse(monkeypatch):
     # scan) to rounding, 1e-9 relative; and forcing the re-simulation of every
     # candidate must pick the same nominal.
     from hamjax.diagnosis import nominal_fit
-    from hamjax.diagnosis.layout import MAX_EFFECT_SLOTS, N_MAX
+    from hamjax.diagnosis.layout import bucket
 
     dt = 0.05
     nl = hj.PiecewiseLinear(k1=1.5, k2=0.7, d1=0.2, d2=-0.3)
@@ -115,21 +115,24 @@ def test_stable_candidates_are_scored_by_their_fit_sse(monkeypatch):
     v = staircase(jr.key(3), 600)
     rec = _record(hj.Hammerstein(nl, lin), v, dt)
     rec["y"] = rec["y"] + 0.02 * np.asarray(jr.normal(jr.key(4), v.shape))
-    n_params = N_MAX + 6 + MAX_EFFECT_SLOTS
     checked = 0
-    for n in (1, 2):
-        b, a = nominal_fit._arx(v, rec["y"], n)
-        for start in (hj.PiecewiseLinear(k1=1.0, k2=1.0), hj.Identity()):
-            fitted, b_fit, den, _, sse = nominal_fit._fit_structure(
-                dt, rec, start, b, a, n_params
-            )
-            if sse is None:  # a clipped dead zone: simulated instead
-                continue
-            model = hj.Hammerstein(fitted, hj.DiscreteTransferFunction(b_fit, den, dt))
-            y_sim = np.asarray(hj.simulate(model, v, dt=dt))
-            want = float(np.sum(np.square(rec["y"] - y_sim)))
-            assert abs(sse - want) <= 1e-9 * want, (n, start, sse, want)
-            checked += 1
+    starts = (hj.PiecewiseLinear(k1=1.0, k2=1.0), hj.Identity())
+    jobs = [
+        (dt, rec, start, *nominal_fit._arx(v, rec["y"], n))
+        for n in (1, 2)
+        for start in starts
+    ]
+    got = nominal_fit._fit_structures(jobs, bucket(v.shape[0]))
+    for (_, _, start, _, _), (fitted, b_fit, den, _, sse) in zip(
+        jobs, got, strict=True
+    ):
+        if sse is None:  # a clipped dead zone: simulated instead
+            continue
+        model = hj.Hammerstein(fitted, hj.DiscreteTransferFunction(b_fit, den, dt))
+        y_sim = np.asarray(hj.simulate(model, v, dt=dt))
+        want = float(np.sum(np.square(rec["y"] - y_sim)))
+        assert abs(sse - want) <= 1e-9 * want, (start, sse, want)
+        checked += 1
     assert checked >= 2
     chosen = fit_nominal(dt, rec)
     original = nominal_fit._read_structure
@@ -190,8 +193,8 @@ def test_a_closed_loop_record_gets_a_strictly_proper_consistent_nominal(monkeypa
 def test_many_records_in_one_batch_fit_as_each_alone():
     # `fit_nominal_many` pads every structure of the records of one padded
     # length to it and fits them side by side: each nominal must be that
-    # record's own `fit_nominal` (same structure; coefficients to rounding, 1e-8 relative,
-    # far below the 1e-6 of the fits' own stopping tolerance)
+    # record's own `fit_nominal` (same structure; coefficients to rounding,
+    # 1e-8 relative, far below the 1e-6 of the fits' own stopping tolerance)
     from hamjax.diagnosis.nominal_fit import fit_nominal_many
 
     dt = 0.05

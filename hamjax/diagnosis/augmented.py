@@ -151,6 +151,10 @@ class CaseArrays(eqx.Module):
     # weight of the Gaussian prior at nominal on the scaled re-fit parameters
     # (`layout.prior_weight`, the user's stated nominal uncertainty)
     prior_weight: Float[Array, ""]
+    # the fixed noise filter of a prediction-error fit, e = (f0 + f1 q^-1 + f2 q^-2)
+    # / (1 + g q^-1) r (`fit.whitened`); the identity (1, 0, 0), 0: output error
+    noise_fir: Float[Array, " 3"]
+    noise_ar: Float[Array, ""]
 
 
 class Row(eqx.Module):

@@ -103,6 +103,7 @@ def normal_equations(
     memory: bool | Bool[Array, ""] = True,
     table: bool | Bool[Array, ""] = True,
     feedback: bool | Bool[Array, ""] = True,
+    whiten: bool | Bool[Array, ""] = True,
 ) -> tuple[Float[Array, ""], Float[Array, "P P"], Float[Array, " P"]]:
     """The record part of the least-squares problem at `theta`: `(r^T r, J^T J,
     J^T r)` of the scaled output residual `r = (y_model - y) m / y_scale` and its
@@ -117,14 +118,40 @@ def normal_equations(
     call, not per block. A non-finite residual sample counts as `1e3` with a zero
     Jacobian row, so a diverging trial step is rejected. `memory`, `table`,
     `feedback`: as in `augmented.simulate_with_filter`.
+
+    With the case's noise filter $A(q)$ (`case.noise_fir`, `case.noise_ar`) not
+    the identity, `r` and `J` are those of the one-step-ahead prediction errors
+    $A(q) r$ of the output with that noise model, from rest (`schedule.whitening_items`): the
+    prediction-error fit with a fixed noise model. `whiten=False`: the filter is
+    skipped (output error; the case's filter must be the identity).
     """
-    return _normal_equations(theta, row, case, (memory, table, feedback))[0]
+    flags = (memory, table, feedback, whiten)
+    return _normal_equations(theta, row, case, flags)[0]
+
+
+def _noise_block(x, state, fir, g):
+    """One block of the noise filter $A(q) = (f_0 + f_1 q^{-1} + f_2 q^{-2}) /
+    (1 + g q^{-1})$ on the rows of `x` (`[Q, BLOCK]`, each row a signal), carrying
+    `state = (last two inputs, last output)` across blocks; the recursion
+    $e_k = -g\\,e_{k-1} + f_k$ as an associative scan of affine maps."""
+    x_prev, e_prev = state
+    ext = jnp.concatenate([x_prev, x], axis=1)
+    f = fir[0] * ext[:, 2:] + fir[1] * ext[:, 1:-1] + fir[2] * ext[:, :-2]
+    f = f.at[:, 0].add(-g * e_prev)
+    a = jnp.broadcast_to(-g, f.shape)
+
+    def compose(left, right):
+        (a1, b1), (a2, b2) = left, right
+        return a1 * a2, a2 * b1 + b2
+
+    _, e = lax.associative_scan(compose, (a, f), axis=1)
+    return (x[:, -2:], e[:, -1]), e
 
 
 def _normal_equations(theta, row, case, flags):
     """`normal_equations`, and the physical parameters and filter at `theta`;
-    `flags = (memory, table, feedback)`."""
-    memory, table, feedback = flags
+    `flags = (memory, table, feedback, whiten)`."""
+    memory, table, feedback, whiten = flags
     P, L = theta.shape[0], case.v_est.shape[0]
     pad = -L % BLOCK
     vd = jnp.pad(delay(case.v_est, row.tau), (0, pad), mode="edge")
@@ -143,9 +170,15 @@ def _normal_equations(theta, row, case, flags):
     filt0 = jnp.zeros(a.shape[0] - 1, theta.dtype)
     state0 = (mem0, filt0)
     dstate0 = (dmem0, jnp.zeros((P, *filt0.shape), filt0.dtype))
+    # the noise filter A(q) on the residual and its Jacobian (P + 1 signals)
+    noise0 = (jnp.zeros((P + 1, 2), theta.dtype), jnp.zeros(P + 1, theta.dtype))
+
+    def noise(x, ns, mb):
+        ns, e = _noise_block(x, ns, case.noise_fir, case.noise_ar)
+        return ns, e * mb[None]  # nothing past the record's end
 
     def body(carry):
-        k, state, dstate, sse, H, g = carry
+        k, state, dstate, ns, sse, H, g = carry
         take = lambda x: lax.dynamic_slice_in_dim(x, k * BLOCK, BLOCK)  # noqa: E731
         vb, yb, mb = take(vd), take(y), take(m)
         f = lambda p, b, a, s: _block_model(  # noqa: E731
@@ -158,23 +191,27 @@ def _normal_equations(theta, row, case, flags):
         ok = jnp.isfinite(r)
         r = jnp.where(ok, r, 1e3)
         J = jnp.where(ok[None], dy * (mb / case.y_scale)[None], 0.0)  # [P, BLOCK]
-        return k + 1, state, dstate, sse + r @ r, H + J @ J.T, g + J @ r
+        skip = lambda x, ns, mb: (ns, x)  # noqa: E731
+        ns, x = switch(whiten, noise, skip, jnp.concatenate([r[None], J]), ns, mb)
+        r, J = x[0], x[1:]
+        return k + 1, state, dstate, ns, sse + r @ r, H + J @ J.T, g + J @ r
 
     carry = (
         jnp.asarray(0, jnp.int32),
         state0,
         dstate0,
+        noise0,
         jnp.zeros((), theta.dtype),
         jnp.zeros((P, P), theta.dtype),
         jnp.zeros(P, theta.dtype),
     )
-    _, _, _, sse, H, g = lax.while_loop(lambda c: c[0] < n_blocks, body, carry)
+    *_, sse, H, g = lax.while_loop(lambda c: c[0] < n_blocks, body, carry)
     return (sse, H, g), (p, b, a)
 
 
 def _row_problem(theta, args):
     """The row's normal equations, for `fitting.least_squares`; `args = (row,
-    case, (memory, table, feedback))`."""
+    case, (memory, table, feedback, whiten))`."""
     row, case, flags = args
     return _normal_equations(theta, row, case, flags)
 
@@ -207,6 +244,7 @@ def fit_row(
     memory: bool | Bool[Array, ""] = True,
     table: bool | Bool[Array, ""] = True,
     feedback: bool | Bool[Array, ""] = True,
+    whiten: bool | Bool[Array, ""] = True,
     *,
     resume: bool | Bool[Array, ""] = False,
 ) -> RowFit:
@@ -214,17 +252,19 @@ def fit_row(
     `memory`, `table`, `feedback`: as in `simulate_augmented` and `static_part`
     (False only if the row frees neither the rate limit nor the backlash and the
     case's map is not a backlash, if the map reads no table (`uses_table`), and if
-    the row frees no feedback slot). `resume`: `row.theta0` and `lam0` are a
-    stopped fit's `theta` and `lam`, continued exactly
-    (`fitting.BatchedLevenbergMarquardt`)."""
-    flags = (memory, table, feedback)
+    the row frees no feedback slot). `whiten`: False only if the case's noise
+    filter is the identity (an output-error fit; `normal_equations`); with a
+    filter, `sse_est` and `s2` are those of the prediction errors. `resume`:
+    `row.theta0` and `lam0` are a stopped fit's `theta` and `lam`, continued
+    exactly (`fitting.BatchedLevenbergMarquardt`)."""
+    flags = (memory, table, feedback, whiten)
     sol = _solve_row(row, case, flags, max_steps, lam0, resume)
     theta, (p, b, a), sse = sol.value, sol.aux, sol.stats["sse"]
     n = jnp.sum(case.m_est)
     used = row.idx < case.anchor.shape[0]
     dof = jnp.maximum(n - jnp.sum(used), 1.0)
-    y_val = simulate_with_filter(p, b, a, row.tau, case.v_val, case, *flags)
-    y_est = simulate_with_filter(p, b, a, row.tau, case.v_est, case, *flags)
+    y_val = simulate_with_filter(p, b, a, row.tau, case.v_val, case, *flags[:3])
+    y_est = simulate_with_filter(p, b, a, row.tau, case.v_est, case, *flags[:3])
     sse_est = sse * case.y_scale**2
     return RowFit(
         theta=theta,
@@ -269,6 +309,7 @@ def _fit_flat(
     memory=None,
     table=None,
     feedback=None,
+    whiten=None,
 ) -> RowFit:
     # `memory`, `table`: True or False for a whole call (static: the other branch
     # is not even compiled, -20 % of the program), or None to decide per
@@ -284,22 +325,24 @@ def _fit_flat(
         table = jnp.any(uses_table(cases.nl_kind))
     if feedback is None:
         feedback = jnp.any(uses_feedback(rows.free))
+    if whiten is None:  # any case of the batch with a noise filter
+        whiten = jnp.any(cases.noise_ar != 0) | jnp.any(cases.noise_fir[:, 1:] != 0)
 
     def fit(r, c, k, lam, res):
-        return fit_row(r, c, k, lam, memory, table, feedback, resume=res)
+        return fit_row(r, c, k, lam, memory, table, feedback, whiten, resume=res)
 
     return jax.vmap(fit)(rows, cases, max_steps, lam0, resume)
 
 
-def _fit_flat_sharded(
-    rows, cases, max_steps, lam0, resume, memory=None, table=None, feedback=None
-):
+def _fit_flat_sharded(rows, cases, max_steps, lam0, resume, **flags):
+    """`_fit_flat` with the rows split over the local devices; `flags`: its
+    `memory`, `table`, `feedback` and `whiten`."""
     mesh = Mesh(np.asarray(jax.local_devices()), ("d",))
     spec = PartitionSpec("d")
     # `check_vma=False`: the per-device bodies are independent (no collectives);
     # each device runs its own Levenberg-Marquardt loop to its own convergence.
     fn = jax.shard_map(
-        ft.partial(_fit_flat, memory=memory, table=table, feedback=feedback),
+        ft.partial(_fit_flat, **flags),
         mesh=mesh,
         in_specs=(spec, spec, spec, spec, spec),
         out_specs=spec,
@@ -316,7 +359,7 @@ def _fit_flat_sharded(
 COMPILER_OPTIONS = {"xla_cpu_use_fusion_emitters": False}
 PROGRAMS = CompiledPrograms(
     {
-        name: jax.jit(fn, static_argnames=("memory", "table", "feedback"))
+        name: jax.jit(fn, static_argnames=("memory", "table", "feedback", "whiten"))
         for name, fn in (("one", _fit_flat), ("sharded", _fit_flat_sharded))
     },
     compiler_options=COMPILER_OPTIONS,
@@ -339,6 +382,7 @@ def fit_batch(
     memory: bool | None = None,
     table: bool | None = None,
     feedback: bool | None = None,
+    whiten: bool | None = None,
 ) -> RowFit:
     """Fit `N` rows, row `i` on case `i` (both stacked along axis 0), each with its
     own step budget and initial damping.
@@ -355,6 +399,7 @@ def fit_batch(
     `memory`, `table`, `feedback`: whether the rows need the input-memory scan,
     the table look-up and the feedback loop, when that is known for every batch
     of a call (a smaller program); None (default) decides per batch at run time.
+    `whiten` likewise, for the cases' noise filters (`normal_equations`).
     """
     args = (
         rows,
@@ -365,6 +410,6 @@ def fit_batch(
     )
     n_dev = jax.local_device_count()  # this process's: cases split over processes
     sharded = n_dev > 1 and rows.theta0.shape[0] % n_dev == 0
-    flags = {"memory": memory, "table": table, "feedback": feedback}
+    flags = {"memory": memory, "table": table, "feedback": feedback, "whiten": whiten}
     kind = "sharded" if sharded else "one"
     return PROGRAMS.get(kind, args, flags, while_compiling)(*args)

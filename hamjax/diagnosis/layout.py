@@ -601,6 +601,8 @@ def prepare(
         u_scale=f(ctx.u_std),
         dw_half=f(ctx.dw_half),
         prior_weight=f(prior_weight(nominal_uncertainty, noise_std / y_scale)),
+        noise_fir=f([1.0, 0.0, 0.0]),
+        noise_ar=f(0.0),
     )
     return Prepared(arrays, rows, ctx, nom, n_est, n_val, w_est, w_val, u_val)
 

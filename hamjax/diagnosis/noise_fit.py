@@ -110,17 +110,26 @@ def noise_fit_numpy(r_est: np.ndarray, r_val: np.ndarray) -> dict:
     }
 
 
+def noise_filter(name: str, value: float) -> tuple[np.ndarray, float]:
+    """The one-step-ahead error filter $A(q) = (f_0 + f_1 q^{-1} + f_2 q^{-2}) /
+    (1 + g q^{-1})$ of the fitted noise predictor `name` (`"ar1_pole"` or
+    `"level_gain"`, as `noise_fit_numpy` reports it) with parameter `value`:
+    $1 - a q^{-1}$ for the AR(1), $\\frac{1 - q^{-1}}{1 - (1 - \\alpha) q^{-1}}$
+    for the local level. Returns `(f, g)`, the form of
+    `augmented.CaseArrays.noise_fir` and `noise_ar`."""
+    if name == "ar1_pole":
+        return np.array([1.0, -value, 0.0]), 0.0
+    if name == "level_gain":
+        return np.array([1.0, -1.0, 0.0]), value - 1.0
+    raise ValueError(f"noise_filter: unknown noise predictor {name!r}")
+
+
 def predictor_errors(name: str, value: float, r: np.ndarray) -> np.ndarray:
     """One-step-ahead errors, on the host, of the fitted noise predictor `name`
-    (`"ar1_pole"` or `"level_gain"`, as `noise_fit_numpy` reports it) with
-    parameter `value` on the residual `r`, from rest: the NumPy twin of
-    `ar1_errors` ($(1 - a q^{-1}) r$) and `local_level_errors`
-    ($\\frac{1 - q^{-1}}{1 - (1 - \\alpha) q^{-1}} r$, with $\\ell_0 = 0$)."""
-    if name == "ar1_pole":
-        return lfilter_numpy(np.array([1.0, -value]), np.array([1.0, 0.0]), r)
-    if name == "level_gain":
-        return lfilter_numpy(np.array([1.0, -1.0]), np.array([1.0, value - 1.0]), r)
-    raise ValueError(f"predictor_errors: unknown noise predictor {name!r}")
+    with parameter `value` on the residual `r`, from rest (`noise_filter`; the
+    NumPy twin of `ar1_errors` and of `local_level_errors`, with $\\ell_0 = 0$)."""
+    f, g = noise_filter(name, value)
+    return lfilter_numpy(f, np.array([1.0, g, 0.0]), r)
 
 
 # The noise models of `fit_noise_family`, in its output order, and how many

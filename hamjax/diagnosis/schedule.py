@@ -26,12 +26,15 @@ from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 
+import equinox as eqx
 import jax
 import jax.tree_util as jtu
 import numpy as np
 
+from .._filters import lfilter_numpy
 from .._results import RESULTS
 from ..simulation.sharding import effective_chunk
+from .attribute import whitening_filter
 from .augmented import Row, uses_feedback, uses_memory, uses_table
 from .fit import LAMBDA0, RowFit, fit_batch, theta_std
 from .layout import (
@@ -42,6 +45,7 @@ from .layout import (
     validation_sse,
 )
 from .nominal_fit import NOMINAL_STEPS
+from .residuals import noise_std_differences
 
 
 REFIT = "parameter_mismatch"
@@ -69,8 +73,10 @@ class Item:
     theta0: np.ndarray
     lam0: float
     budget: int  # steps, the re-evaluation of `theta0` of a resumed item included
-    stage: str  # "screen", "finish" or "more"
+    stage: str  # "screen", "finish", "more" or "whiten"
     replace: str  # when the result replaces the row's: "always", "lower", "stopped"
+    # a prediction-error fit's noise filter and prior weight (`whitening_items`)
+    noise: tuple[np.ndarray, float, float] | None = None
 
 
 def finishing_items(c: int, prep: Prepared, fits: dict) -> list[Item]:
@@ -124,6 +130,42 @@ def finishing_items(c: int, prep: Prepared, fits: dict) -> list[Item]:
     return out
 
 
+def whitening_items(c: int, prep: Prepared, fits: dict) -> list[Item]:
+    """The prediction-error fits of case `c`, once its rows are finished: when the
+    nominal's residual has a significant noise model ($A(q)$,
+    `attribute.whitening_filter`), the best rows of the re-fit, of the
+    `CONTINUE_CLASSES` leading structural classes (by estimation SSE, as in
+    `finishing_items`) and of the class of least validation error again, each
+    from its output-error fit, minimising the one-step-ahead errors $A(q) r$ with
+    that noise model fixed (`fit.normal_equations`); `attribute` judges the
+    deterministic gap through $A$ on these fits (the other classes' on their
+    output-error fits). The prior weight, a noise
+    variance times the prior's precision (`layout.prior_weight`), is scaled by
+    the ratio of the innovations' variance to the white output noise's (both by
+    `residuals.noise_std_differences`, on the nominal's estimation residual).
+    None of them when the noise model is not significant."""
+    filt = whitening_filter(prep)
+    if filt is None:
+        return []
+    fir, ar = filt
+    r_est = np.asarray(prep.arrays.y_est)[: prep.n_est] - prep.w_est
+    e_est = lfilter_numpy(fir, np.array([1.0, ar, 0.0]), r_est)
+    sigma, sigma_e = noise_std_differences(r_est), noise_std_differences(e_est)
+    ratio = (sigma_e / sigma) ** 2 if sigma > 0 else 1.0
+    weight = float(prep.arrays.prior_weight) * ratio
+    noise = (fir, ar, weight)
+    sse, sse_val = finite_sse(fits), validation_sse(prep, fits)
+    best = best_row_per_class(prep, sse, sse_val)
+    refit = best.pop(REFIT)
+    lead = sorted(best.values(), key=lambda k: sse[k])[:CONTINUE_CLASSES]
+    chosen = min(best.values(), key=lambda k: sse_val[k])
+    return [
+        Item(c, k, fits["theta"][k], LAMBDA0, FINISH_STEPS, "whiten", "always", noise)
+        for k in dict.fromkeys([refit, *lead, chosen])
+        if np.isfinite(sse[k])
+    ]
+
+
 def merge(fits: dict, item: Item, new: dict) -> None:
     """Write a finished item's fit into its case's rows when the rule allows: a
     screening fit always; after it, the lowest estimation SSE of the row's fits
@@ -131,6 +173,8 @@ def merge(fits: dict, item: Item, new: dict) -> None:
     finishing items may finish in either order (in one batch or in several, by
     the cases sharing the call), and the row ends the same."""
     k = item.row
+    if item.stage == "whiten":  # the prediction-error fits, beside the rows
+        fits = fits["whitened"]
     if item.replace == "always":
         take = True
     elif item.replace == "lower":  # a restart: kept only if strictly better
@@ -172,7 +216,8 @@ def run_queue(
     `on_case(c, fits)` as soon as case `c` is finished, `fits` being its rows'
     `RowFit` fields (NumPy, leading axis row) plus `theta_std`. `while_compiling`:
     as in `fit.fit_batch`."""
-    queues: dict[str, deque] = {s: deque() for s in ("screen", "finish", "more")}
+    stages = ("screen", "finish", "more", "whiten")
+    queues: dict[str, deque] = {s: deque() for s in stages}
     fits: list[dict | None] = [None] * len(preps)
     outstanding = [len(p.rows) for p in preps]
     arrays = jtu.tree_map(lambda *x: np.stack(x), *[p.arrays for p in preps])
@@ -240,12 +285,22 @@ def run_queue(
             extra = finishing_items(c, preps[c], fits[c])
             queues["finish"].extend(extra)
             outstanding[c] = len(extra)
-        if outstanding[c] == 0:
+        elif item.stage in ("finish", "more") and outstanding[c] == 0:
             fits[c]["theta_std"] = parameter_std(preps[c], fits[c])
+            extra = whitening_items(c, preps[c], fits[c])
+            if extra:
+                fits[c]["whitened"] = {k: np.copy(x) for k, x in fits[c].items()}
+            queues["whiten"].extend(extra)
+            outstanding[c] = len(extra)
+        if outstanding[c] == 0:
+            if "whitened" in fits[c]:
+                w = fits[c]["whitened"]
+                w["theta_std"] = parameter_std(preps[c], w)
             on_case(c, fits[c])
 
     while any(queues.values()):
-        full = [s for s in ("more", "finish", "screen") if len(queues[s]) >= batch]
+        order = ("whiten", "more", "finish", "screen")
+        full = [s for s in order if len(queues[s]) >= batch]
         flush = not full and not queues["screen"]
         if full:
             take = [queues[full[0]].popleft() for _ in range(batch)]
@@ -254,7 +309,7 @@ def run_queue(
             queues["screen"].clear()
         else:  # the end: what is left runs once, each row with its whole budget
             take = []
-            for stage in ("more", "finish"):
+            for stage in ("whiten", "more", "finish"):
                 while queues[stage] and len(take) < batch:
                     take.append(queues[stage].popleft())
         budgets = [
@@ -290,6 +345,18 @@ def run_batch(
         free=pick("free"),
     )
     cases = jtu.tree_map(lambda x: x[np.asarray([it.case for it in items])], arrays)
+    noisy = [(j, it.noise) for j, it in enumerate(items) if it.noise is not None]
+    if noisy:  # the prediction-error fits' noise filters and prior weights
+        fir, ar, weight = (
+            np.copy(x) for x in (cases.noise_fir, cases.noise_ar, cases.prior_weight)
+        )
+        for j, (f, g, w) in noisy:
+            fir[j], ar[j], weight[j] = f, g, w
+        cases = eqx.tree_at(
+            lambda a: (a.noise_fir, a.noise_ar, a.prior_weight),
+            cases,
+            (fir, ar, weight),
+        )
     fit = jax.device_get(
         fit_batch(
             row,

@@ -20,11 +20,16 @@ from hamjax.diagnosis.schedule import run_queue, whitening_items
 from hamjax.papers.gap.demo_cases import coloured_case, tiny_case
 
 
+@eqx.filter_jit
+def _simulated_residual(theta, row, case):
+    p, b, a = _coefficients(theta, row, case)
+    y = simulate_with_filter(p, b, a, row.tau, case.v_est, case)
+    return (y - case.y_est) / case.y_scale
+
+
 def _residual(theta, row, case, n):
     """The scaled output-error residual of a row on the estimation record."""
-    p, b, a = _coefficients(jnp.asarray(theta), row, case)
-    y = simulate_with_filter(p, b, a, row.tau, case.v_est, case)
-    return np.asarray((y - case.y_est) / case.y_scale)[:n]
+    return np.asarray(_simulated_residual(jnp.asarray(theta), row, case))[:n]
 
 
 @pytest.fixture(scope="module")

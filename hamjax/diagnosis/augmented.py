@@ -152,7 +152,8 @@ class CaseArrays(eqx.Module):
     # (`layout.prior_weight`, the user's stated nominal uncertainty)
     prior_weight: Float[Array, ""]
     # the fixed noise filter of a prediction-error fit, e = (f0 + f1 q^-1 + f2 q^-2)
-    # / (1 + g q^-1) r (`fit.whitened`); the identity (1, 0, 0), 0: output error
+    # / (1 + g q^-1) r (`schedule.whitening_items`); the identity (1, 0, 0), 0:
+    # output error
     noise_fir: Float[Array, " 3"]
     noise_ar: Float[Array, ""]
 

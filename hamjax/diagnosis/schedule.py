@@ -31,10 +31,9 @@ import jax
 import jax.tree_util as jtu
 import numpy as np
 
-from .._filters import lfilter_numpy
 from .._results import RESULTS
 from ..simulation.sharding import effective_chunk
-from .attribute import whitening_filter
+from .attribute import noise_candidates, whitening_predictor
 from .augmented import Row, uses_feedback, uses_memory, uses_table
 from .fit import LAMBDA0, RowFit, fit_batch, theta_std
 from .layout import (
@@ -44,6 +43,7 @@ from .layout import (
     refits_linear,
     validation_sse,
 )
+from .noise_fit import noise_filter, predictor_errors
 from .nominal_fit import NOMINAL_STEPS
 from .residuals import noise_std_differences
 
@@ -79,6 +79,17 @@ class Item:
     noise: tuple[np.ndarray, float, float] | None = None
 
 
+def leading_rows(prep: Prepared, fits: dict) -> tuple:
+    """`(sse, sse_val, refit, best, lead)`: each row's estimation and validation
+    SSE, the re-fit's best row, the other classes' best rows (`{class: row}`)
+    and the rows of the `CONTINUE_CLASSES` leading ones by estimation SSE."""
+    sse, sse_val = finite_sse(fits), validation_sse(prep, fits)
+    best = best_row_per_class(prep, sse, sse_val)
+    refit = best.pop(REFIT)
+    lead = sorted(best.values(), key=lambda k: sse[k])[:CONTINUE_CLASSES]
+    return sse, sse_val, refit, best, lead
+
+
 def finishing_items(c: int, prep: Prepared, fits: dict) -> list[Item]:
     """The rows of case `c` the decision rests on, after screening (`fits`: the
     `RowFit` fields of its rows, NumPy).
@@ -109,10 +120,7 @@ def finishing_items(c: int, prep: Prepared, fits: dict) -> list[Item]:
       class's rank: it starts at the linear fit's numerator, far from its own
       optimum, so a few screening steps cannot rank it.
     """
-    sse = finite_sse(fits)
-    best = best_row_per_class(prep, sse, validation_sse(prep, fits))
-    i_pm = best.pop(REFIT)
-    lead = sorted(best.values(), key=lambda k: sse[k])[:CONTINUE_CLASSES]
+    sse, _, i_pm, best, lead = leading_rows(prep, fits)
     used = np.asarray(prep.rows[i_pm][1].idx) < prep.arrays.anchor.shape[0]
     budget = lambda k: (  # noqa: E731
         NOMINAL_STEPS - SCREEN_STEPS if refits_linear(prep.rows[k][1]) else FINISH_STEPS
@@ -133,7 +141,7 @@ def finishing_items(c: int, prep: Prepared, fits: dict) -> list[Item]:
 def whitening_items(c: int, prep: Prepared, fits: dict) -> list[Item]:
     """The prediction-error fits of case `c`, once its rows are finished: when the
     nominal's residual has a significant noise model ($A(q)$,
-    `attribute.whitening_filter`), the best rows of the re-fit, of the
+    `attribute.whitening_predictor` of `fits["noise"]`), the best rows of the re-fit, of the
     `CONTINUE_CLASSES` leading structural classes (by estimation SSE, as in
     `finishing_items`) and of the class of least validation error again, each
     from its output-error fit, minimising the one-step-ahead errors $A(q) r$ with
@@ -144,20 +152,16 @@ def whitening_items(c: int, prep: Prepared, fits: dict) -> list[Item]:
     the ratio of the innovations' variance to the white output noise's (both by
     `residuals.noise_std_differences`, on the nominal's estimation residual).
     None of them when the noise model is not significant."""
-    filt = whitening_filter(prep)
-    if filt is None:
+    predictor = whitening_predictor(fits["noise"], prep)
+    if predictor is None:
         return []
-    fir, ar = filt
     r_est = np.asarray(prep.arrays.y_est)[: prep.n_est] - prep.w_est
-    e_est = lfilter_numpy(fir, np.array([1.0, ar, 0.0]), r_est)
+    e_est = predictor_errors(*predictor, r_est)
     sigma, sigma_e = noise_std_differences(r_est), noise_std_differences(e_est)
     ratio = (sigma_e / sigma) ** 2 if sigma > 0 else 1.0
     weight = float(prep.arrays.prior_weight) * ratio
-    noise = (fir, ar, weight)
-    sse, sse_val = finite_sse(fits), validation_sse(prep, fits)
-    best = best_row_per_class(prep, sse, sse_val)
-    refit = best.pop(REFIT)
-    lead = sorted(best.values(), key=lambda k: sse[k])[:CONTINUE_CLASSES]
+    noise = (*noise_filter(*predictor), weight)
+    sse, sse_val, refit, best, lead = leading_rows(prep, fits)
     chosen = min(best.values(), key=lambda k: sse_val[k])
     return [
         Item(c, k, fits["theta"][k], LAMBDA0, FINISH_STEPS, "whiten", "always", noise)
@@ -287,9 +291,10 @@ def run_queue(
             outstanding[c] = len(extra)
         elif item.stage in ("finish", "more") and outstanding[c] == 0:
             fits[c]["theta_std"] = parameter_std(preps[c], fits[c])
+            fits[c]["noise"] = noise_candidates(preps[c])  # for `attribute` too
             extra = whitening_items(c, preps[c], fits[c])
             if extra:
-                fits[c]["whitened"] = {k: np.copy(x) for k, x in fits[c].items()}
+                fits[c]["whitened"] = {k: np.copy(fits[c][k]) for k in FIELDS}
             queues["whiten"].extend(extra)
             outstanding[c] = len(extra)
         if outstanding[c] == 0:

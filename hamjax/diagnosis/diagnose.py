@@ -158,8 +158,12 @@ def run_blocks(n_cases: int) -> list[range]:
 
 def _evidence_samples(att: Attribution, mse: dict) -> float:
     """`probabilities.effective_samples` of the named effect against its best
-    rival (the nominal model's residual for `none`)."""
+    rival (the reference's residual for `none`: the nominal model's, or the
+    re-fit's beside a fitted nominal)."""
     residual = {"none": att.r_before} | {c.effect: c.residual for c in att.candidates}
+    if att.tests.get("reference", {}).get("fitted_nominal", False):
+        pm = residual.pop("parameter_mismatch")
+        residual["none"] = pm if att.reference == "refit" else att.r_before
     named = att.chosen.effect if att.chosen is not None else "none"
     rivals = [k for k in mse if k != named]
     if named not in residual or not rivals:
@@ -203,10 +207,15 @@ def _result(prep, att: Attribution, val: dict) -> GapDiagnosis:
         prep.ctx.dt,
         y=val["y"],
     )
-    # each class is tried once: its validation mean-square error
-    mse = {"none": att.gap_before**2} | {
-        c.effect: c.gap_after**2 for c in att.candidates
-    }
+    # each class is tried once: its validation mean-square error; beside a fitted
+    # nominal a re-fit is no verdict, and `none` is the reference's (the re-fit's
+    # when it is the reference)
+    tried = {c.effect: c.gap_after**2 for c in att.candidates}
+    none = att.gap_before**2
+    if att.tests.get("reference", {}).get("fitted_nominal", False):
+        pm = tried.pop("parameter_mismatch")
+        none = pm if att.reference == "refit" else none
+    mse = {"none": none} | tried
     n_eff = _evidence_samples(att, mse)
     return GapDiagnosis(
         effect=att.effect,

@@ -383,6 +383,9 @@ class Prepared:
     w_est: np.ndarray  # nominal output on the estimation record
     w_val: np.ndarray
     u_val: np.ndarray  # nominal u = F(v) on validation
+    # the nominal is hamjax's own fit (no model.json): the re-fit is then the
+    # reference the effects are judged against (`attribute.reference_row`)
+    fitted: bool = False
 
 
 def prepare(
@@ -604,7 +607,9 @@ def prepare(
         noise_fir=f([1.0, 0.0, 0.0]),
         noise_ar=f(0.0),
     )
-    return Prepared(arrays, rows, ctx, nom, n_est, n_val, w_est, w_val, u_val)
+    return Prepared(
+        arrays, rows, ctx, nom, n_est, n_val, w_est, w_val, u_val, bool(fitted_nominal)
+    )
 
 
 def finite_sse(fits: dict) -> np.ndarray:

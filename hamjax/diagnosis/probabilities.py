@@ -118,7 +118,9 @@ def probabilities(
     """Every class of the contract with its probability (see the module docstring).
 
     **Arguments:** the named `effect`, the validation mean-square error of every
-    candidate tried (`none`: the nominal model's), the validation length `n`, and
+    candidate tried (`none`: the nominal model's, or beside a fitted nominal the
+    reference's, without `parameter_mismatch`: `attribute`, *Beside a fitted
+    nominal*), the validation length `n`, and
     the diagnosis's `shrink`.
     """
     p_named = named_confidence(effect, mse, n) if effect != "unexplained" else 0.0

@@ -149,6 +149,20 @@ def report_markdown(d, name: str = "case", nominal: str | None = None) -> str:
         )
     if nominal is not None:
         lines.append(f"- nominal model: {nominal}")
+    ref = d.tests.get("reference", {})
+    if ref.get("fitted_nominal"):
+        lines.append(
+            "- reference: "
+            + (
+                "the re-fit of hamjax's own nominal, which improves on it "
+                "significantly (the effects are judged against the re-fit; gap "
+                "before stays the nominal's)"
+                if ref.get("model") == "refit"
+                else "hamjax's own nominal"
+            )
+            + "; the nominal was fitted here, so a re-fit of it is no verdict "
+            "(`parameter_mismatch` is not named)"
+        )
     fb = d.where.get("feedback", {})
     if fb.get("closed_loop"):
         lines.append(

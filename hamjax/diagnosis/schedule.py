@@ -33,7 +33,7 @@ import numpy as np
 
 from .._results import RESULTS
 from ..simulation.sharding import effective_chunk
-from .attribute import noise_candidates, whitening_predictor
+from .attribute import noise_candidates, reference_residuals, whitening_predictor
 from .augmented import Row, uses_feedback, uses_memory, uses_table
 from .fit import LAMBDA0, RowFit, fit_batch, theta_std
 from .layout import (
@@ -140,8 +140,10 @@ def finishing_items(c: int, prep: Prepared, fits: dict) -> list[Item]:
 
 def whitening_items(c: int, prep: Prepared, fits: dict) -> list[Item]:
     """The prediction-error fits of case `c`, once its rows are finished: when the
-    nominal's residual has a significant noise model ($A(q)$,
-    `attribute.whitening_predictor` of `fits["noise"]`), the best rows of the re-fit, of the
+    reference's residual (the nominal's, or the re-fit's beside a fitted nominal:
+    `attribute.reference_residuals`) has a significant noise model ($A(q)$,
+    `attribute.whitening_predictor` of `fits["noise"]`), the best rows of the
+    re-fit, of the
     `CONTINUE_CLASSES` leading structural classes (by estimation SSE, as in
     `finishing_items`) and of the class of least validation error again, each
     from its output-error fit, minimising the one-step-ahead errors $A(q) r$ with
@@ -150,12 +152,13 @@ def whitening_items(c: int, prep: Prepared, fits: dict) -> list[Item]:
     output-error fits). The prior weight, a noise
     variance times the prior's precision (`layout.prior_weight`), is scaled by
     the ratio of the innovations' variance to the white output noise's (both by
-    `residuals.noise_std_differences`, on the nominal's estimation residual).
+    `residuals.noise_std_differences`, on the reference's estimation residual:
+    the nominal's, or the re-fit's beside a fitted nominal).
     None of them when the noise model is not significant."""
-    predictor = whitening_predictor(fits["noise"], prep)
+    predictor = whitening_predictor(fits["noise"], prep, fits)
     if predictor is None:
         return []
-    r_est = np.asarray(prep.arrays.y_est)[: prep.n_est] - prep.w_est
+    r_est = reference_residuals(prep, fits)[0]
     e_est = predictor_errors(*predictor, r_est)
     sigma, sigma_e = noise_std_differences(r_est), noise_std_differences(e_est)
     ratio = (sigma_e / sigma) ** 2 if sigma > 0 else 1.0
@@ -291,7 +294,7 @@ def run_queue(
             outstanding[c] = len(extra)
         elif item.stage in ("finish", "more") and outstanding[c] == 0:
             fits[c]["theta_std"] = parameter_std(preps[c], fits[c])
-            fits[c]["noise"] = noise_candidates(preps[c])  # for `attribute` too
+            fits[c]["noise"] = noise_candidates(preps[c], fits[c])  # `attribute` too
             extra = whitening_items(c, preps[c], fits[c])
             if extra:
                 fits[c]["whitened"] = {k: np.copy(fits[c][k]) for k in FIELDS}

@@ -189,7 +189,9 @@ own fit converged, not how the plant differs from a model someone gave:
 verdict falls to the noise models, then `none`. The reference the rest is judged
 against is the better of hamjax's two fits of the class: the re-fit when it
 improves significantly on the nominal on validation (`refit_over_nominal`, the
-rule's two conditions), otherwise the nominal. On a closed-loop record the
+rule's two conditions), otherwise the nominal (the first step, the deterministic
+gap, and the shrink stay measured against the nominal, whose simulation is what
+the user is shown). On a closed-loop record the
 nominal is the consistent fit (`nominal_fit`'s high-order ARX stage) and the
 output-error re-fit is biased and often worse on validation, so the re-fit
 cannot be the reference unconditionally (measured and rejected: stiction
@@ -274,6 +276,7 @@ class Attribution:
     # what the effects were judged against: "nominal", or "refit" beside
     # hamjax's own fitted nominal (`reference_row`)
     reference: str = "nominal"
+    fitted: bool = False  # the nominal is hamjax's own fit (no model.json)
 
 
 def rms(x: np.ndarray) -> float:
@@ -301,17 +304,16 @@ def gaps(r_before: np.ndarray, chosen: Candidate | None) -> tuple:
 
 
 def attribution(
+    prep: Prepared,
     effect: str,
     chosen: Candidate | None,
     cands: list,
     tests: dict,
-    r_before: np.ndarray,
-    y_nominal: np.ndarray,
     gap: tuple,
-    reference: str = "nominal",
 ) -> Attribution:
-    """The `Attribution`, candidates ranked by gap after the named one; `gap` as
-    `gaps` returns it."""
+    """The `Attribution` of case `prep`, candidates ranked by gap after the named
+    one; `gap` as `gaps` returns it; the reference as `tests["reference"]` says
+    (the nominal's when absent)."""
     gap_before, gap_after, floor, shrink = gap
     order = sorted(cands, key=lambda c: c.gap_after)
     if chosen is not None:
@@ -325,9 +327,10 @@ def attribution(
         candidates=order,
         chosen=chosen,
         tests=tests,
-        r_before=r_before,
-        y_nominal=y_nominal,
-        reference=reference,
+        r_before=np.asarray(prep.arrays.y_val)[: prep.n_val] - prep.w_val,
+        y_nominal=prep.w_val,
+        reference=tests.get("reference", {}).get("model", "nominal"),
+        fitted=prep.fitted,
     )
 
 
@@ -414,16 +417,28 @@ def _nested_lr(
     }
 
 
+def _predicted(noise_c: Candidate, r: np.ndarray) -> np.ndarray | None:
+    """The residual `r` through `noise_c`'s one-step predictor (its errors), or
+    None when `r` is not finite (a failed fit)."""
+    if not np.all(np.isfinite(r)):
+        return None
+    ((name, param),) = noise_c.params.items()
+    return predictor_errors(name, param["value"], r)
+
+
 def _over_noise(noise_c: Candidate, r_val: np.ndarray, sig) -> dict:
     """The deterministic candidate's validation residual `r_val` seen through the
-    noise predictor of `noise_c` (fitted on the nominal residual: the same
-    whitening filter on both sides), against the nominal model with it
-    (`noise_c`): one-step-ahead errors on validation, the batch-means test at
-    $z^\\star$ (module docstring, *Derivation of the veto*)."""
-    if not np.all(np.isfinite(r_val)):
+    noise predictor of `noise_c` (fitted on the reference's residual: the same
+    whitening filter on both sides), against the reference with it (`noise_c`'s
+    residual: the nominal's, or where the re-fit is the reference its
+    prediction-error fit's, `attribute`'s `through`; the key
+    `nominal_gap_with_noise` holds that reference's gap): one-step-ahead errors
+    on validation, the batch-means test at $z^\\star$ (module docstring,
+    *Derivation of the veto*)."""
+    err = _predicted(noise_c, r_val)
+    if err is None:
         return {"z": -np.inf, "significant": False, "noise": noise_c.effect}
-    ((name, param),) = noise_c.params.items()
-    err = predictor_errors(name, param["value"], r_val)
+    (param,) = noise_c.params.values()
     ok, z = sig(noise_c.residual, err, rms(err) ** 2)
     return {
         "z": z,
@@ -441,15 +456,15 @@ def _gap_through_noise(
     """The deterministic gap judged with the noise model on top (module
     docstring, *The gap through the noise predictor*): every deterministic
     candidate's validation residual through `noise_c`'s one-step predictor; the
-    best against the nominal with it (`_over_noise`, $z^\\star$), then the best
-    structural one against the re-fit, both through the same filter
-    ($z_{struct}$). Returns the candidate named, or None (the noise model)."""
-    ((name, param),) = noise_c.params.items()
+    best against the reference with it (`noise_c`, `_over_noise`, $z^\\star$),
+    then the best structural one against the re-fit, both through the same
+    filter ($z_{struct}$). Where the re-fit is the reference `det` leaves it
+    out, and the last comparison repeats the first at a lower level. Returns
+    the candidate named, or None (the noise model)."""
 
     def white(c: Candidate) -> np.ndarray:
-        if not np.all(np.isfinite(c.residual)):
-            return np.full_like(c.residual, np.inf)
-        return predictor_errors(name, param["value"], c.residual)
+        err = _predicted(noise_c, c.residual)
+        return np.full_like(c.residual, np.inf) if err is None else err
 
     errs = {c.effect: white(c) for c in det}
     best = min(det, key=lambda c: rms(errs[c.effect]))
@@ -461,7 +476,7 @@ def _gap_through_noise(
     pm = cands["parameter_mismatch"]
     structural = [c for c in det if c.effect != "parameter_mismatch"]
     best_s = min(structural, key=lambda c: rms(errs[c.effect]))
-    # (beside a fitted nominal `det` leaves the re-fit out: it is the reference)
+    # (where the re-fit is the reference, `det` leaves it out)
     e_pm = errs[pm.effect] if pm.effect in errs else white(pm)
     e_s = errs[best_s.effect]
     s_sig, z_s = sig(e_pm, e_s, rms(e_s) ** 2, z_star=Z_STRUCT)
@@ -534,7 +549,10 @@ def deterministic_candidates(
 def refit_over_nominal(prep: Prepared, fit: dict) -> tuple[int, bool, float]:
     """`(row, significant, z)`: the re-fit's best row and whether its validation
     residual improves on the nominal model's by the rule's two conditions
-    (`significant`; the materiality floor the re-fit's own, `noise_floor_hf`)."""
+    (`significant`; the materiality floor the re-fit's own, `noise_floor_hf`).
+    Read from `fit["reference"]` where `schedule.run_queue` stored it."""
+    if "reference" in fit:
+        return fit["reference"]
     sse = finite_sse(fit)
     k = best_row_per_class(prep, sse, validation_sse(prep, fit))["parameter_mismatch"]
     w = {
@@ -555,8 +573,10 @@ def reference_row(prep: Prepared, fit: dict | None) -> int | None:
     (module docstring, *Beside a fitted nominal*): beside hamjax's own nominal
     (`prep.fitted`), when the re-fit improves significantly on it
     (`refit_over_nominal`); None: the nominal model is the reference."""
-    if not prep.fitted or fit is None:
+    if not prep.fitted:
         return None
+    if fit is None:
+        raise ValueError("beside a fitted nominal the reference needs the case's fits")
     k, ok, _ = refit_over_nominal(prep, fit)
     return k if ok else None
 
@@ -565,7 +585,8 @@ def reference_residuals(
     prep: Prepared, fit: dict | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
     """`(estimation, validation)` residuals of the reference (`reference_row`):
-    the re-fit's beside a fitted nominal, the nominal model's otherwise."""
+    the re-fit's where it is the reference beside a fitted nominal, the nominal
+    model's otherwise. `fit` is required beside a fitted nominal."""
     y_est = np.asarray(prep.arrays.y_est)[: prep.n_est]
     y_val = np.asarray(prep.arrays.y_val)[: prep.n_val]
     k = reference_row(prep, fit)
@@ -578,8 +599,8 @@ def reference_residuals(
 def noise_candidates(prep: Prepared, fit: dict | None = None) -> dict[str, Candidate]:
     """The noise-model effects (`drift`, `coloured_noise`): their predictors
     fitted on the reference's estimation residual (`reference_residuals`: the
-    nominal's, or the re-fit's beside a fitted nominal), scored on its validation
-    one."""
+    nominal's, or the re-fit's where it is the reference), scored on its
+    validation one."""
     noise = noise_fit_numpy(*reference_residuals(prep, fit))
     cands = {}
     for effect in NOISE_NAMES:
@@ -598,14 +619,14 @@ def noise_candidates(prep: Prepared, fit: dict | None = None) -> dict[str, Candi
 
 
 def nominal_noise(
-    cands: dict[str, Candidate], r_before: np.ndarray
+    cands: dict[str, Candidate], r_ref: np.ndarray
 ) -> tuple[Candidate, bool, float]:
     """The noise model of the higher likelihood on the estimation record (one
     parameter each: no penalty between them), and whether it is significant
-    against the white-noise predictor on validation: `(candidate, significant,
-    z)`."""
+    against the white-noise predictor of the reference's validation residual
+    `r_ref` (`reference_residuals`): `(candidate, significant, z)`."""
     c = min((cands[e] for e in NOISE_NAMES), key=lambda c: c.est_sse)
-    ok, z = significant(r_before, c.residual, c.gap_after**2)
+    ok, z = significant(r_ref, c.residual, c.gap_after**2)
     return c, ok, z
 
 
@@ -657,12 +678,18 @@ def attribute(prep: Prepared, fit: dict) -> Attribution:
     def through(noise_c: Candidate) -> Candidate:
         # the reference seen through the noise predictor: the nominal's (the noise
         # candidate itself), or the re-fit's prediction-error fit through it
-        pm = cands_pe["parameter_mismatch"]
-        if not refit_ref or not np.all(np.isfinite(pm.residual)):
+        err = _predicted(noise_c, cands_pe["parameter_mismatch"].residual)
+        if not refit_ref or err is None:
             return noise_c
-        ((name, param),) = noise_c.params.items()
-        err = predictor_errors(name, param["value"], pm.residual)
-        return Candidate(noise_c.effect, -1, rms(err), err, None, noise_c.params)
+        return Candidate(
+            noise_c.effect,
+            -1,
+            rms(err),
+            err,
+            None,
+            noise_c.params,
+            measure="one_step_prediction",
+        )
 
     det = [cands[e] for e in DETERMINISTIC_NAMES if e in cands]
     best_det = min(det, key=lambda c: c.gap_after)
@@ -760,13 +787,5 @@ def attribute(prep: Prepared, fit: dict) -> Attribution:
                 # other experiment is M's noise, which no simulation follows (a
                 # control loop's load), not an unexplained mismatch.
                 effect = chosen.effect
-    return attribution(
-        effect,
-        chosen,
-        list(cands.values()),
-        tests,
-        r_before,
-        prep.w_val,
-        (gap_before, gap_after, floor, shrink),
-        reference=tests["reference"]["model"],
-    )
+    gap = (gap_before, gap_after, floor, shrink)
+    return attribution(prep, effect, chosen, list(cands.values()), tests, gap)

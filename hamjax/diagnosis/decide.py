@@ -251,6 +251,7 @@ def decide(prep: Prepared, fit: dict) -> Attribution:
     t_star = threshold(k_tests, ALPHA / 2)
     levels = sorted({level(q) for q in pairs} - {0})
     named = (0, 0)
+    significant_at: dict[int, tuple[int, int]] = {}
     per_level: dict[int, dict] = {}
     sse_est = np.sum(e_est**2, axis=-1)
     # a level's best: log-likelihood on both records (the estimation one at the
@@ -286,6 +287,12 @@ def decide(prep: Prepared, fit: dict) -> Attribution:
         per_level[lev] = entry
         if ok:
             named = q
+            significant_at[lev] = q
+    if prep.fitted and named[0] == i_pm:
+        # beside hamjax's own nominal a re-fit is no verdict (`attribute`, *Beside
+        # a fitted nominal*): the highest significant level below it, else none
+        lower = [lev for lev in significant_at if lev < 3]
+        named = significant_at[max(lower)] if lower else (0, 0)
     effect = pair_class(*named)
 
     # candidates for the ranking: each class's deterministic simulation, the noise
@@ -325,6 +332,7 @@ def decide(prep: Prepared, fit: dict) -> Attribution:
         if gap[3] < SHRINK_EXPLAINED:
             effect = "unexplained"
     tests = {
+        "reference": {"model": "nominal", "fitted_nominal": prep.fitted},
         "likelihood": {
             "alpha": ALPHA,
             "comparisons": k_tests,
@@ -333,8 +341,6 @@ def decide(prep: Prepared, fit: dict) -> Attribution:
             "named_noise_model": NOISE_MODELS[named[1]],
             "per_sample_loglik": float(total[named] / n_val),
             "levels": {str(k): v for k, v in per_level.items()},
-        }
+        },
     }
-    return attribution(
-        effect, chosen, list(cands.values()), tests, r_before, prep.w_val, gap
-    )
+    return attribution(prep, effect, chosen, list(cands.values()), tests, gap)

@@ -156,20 +156,29 @@ def run_blocks(n_cases: int) -> list[range]:
     return [range(k, min(k + size, n_cases)) for k in range(0, n_cases, size)]
 
 
-def _evidence_samples(att: Attribution, mse: dict) -> float:
+def _tried(att: Attribution) -> dict[str, tuple[float, np.ndarray]]:
+    """Each class tried once, `none` included: its validation mean-square error and
+    residual. Beside a fitted nominal a re-fit is no verdict, and `none` is the
+    reference (the re-fit's when it is the reference: `attribute`)."""
+    out = {"none": (att.gap_before**2, att.r_before)} | {
+        c.effect: (c.gap_after**2, c.residual) for c in att.candidates
+    }
+    if att.fitted:
+        refit = out.pop("parameter_mismatch")
+        if att.reference == "refit":
+            out["none"] = refit
+    return out
+
+
+def _evidence_samples(att: Attribution, tried: dict) -> float:
     """`probabilities.effective_samples` of the named effect against its best
-    rival (the reference's residual for `none`: the nominal model's, or the
-    re-fit's beside a fitted nominal)."""
-    residual = {"none": att.r_before} | {c.effect: c.residual for c in att.candidates}
-    if att.tests.get("reference", {}).get("fitted_nominal", False):
-        pm = residual.pop("parameter_mismatch")
-        residual["none"] = pm if att.reference == "refit" else att.r_before
+    rival (`tried`: `_tried(att)`)."""
     named = att.chosen.effect if att.chosen is not None else "none"
-    rivals = [k for k in mse if k != named]
-    if named not in residual or not rivals:
+    rivals = [k for k in tried if k != named]
+    if named not in tried or not rivals:
         return float(att.r_before.shape[0])
-    rival = min(rivals, key=lambda k: mse[k])
-    return effective_samples(residual[named], residual[rival])
+    rival = min(rivals, key=lambda k: tried[k][0])
+    return effective_samples(tried[named][1], tried[rival][1])
 
 
 def _result(prep, att: Attribution, val: dict) -> GapDiagnosis:
@@ -182,9 +191,15 @@ def _result(prep, att: Attribution, val: dict) -> GapDiagnosis:
     else:
         y_aug, r_after = chosen.prediction, chosen.residual
     noise = chosen is not None and chosen.measure == "one_step_prediction"
+    base = (
+        "the re-fitted nominal's simulation (it improves significantly on "
+        "hamjax's own nominal fit)"
+        if att.reference == "refit"
+        else "nominal simulation"
+    )
     definition = (
-        "one-step-ahead prediction error (nominal simulation + fitted noise/trend "
-        "predictor; gap_before with the white-noise predictor)"
+        f"one-step-ahead prediction error ({base} + fitted noise/trend predictor; "
+        "gap_before with the white-noise predictor)"
         if noise
         else "simulation error from rest on the validation record"
     )
@@ -207,16 +222,9 @@ def _result(prep, att: Attribution, val: dict) -> GapDiagnosis:
         prep.ctx.dt,
         y=val["y"],
     )
-    # each class is tried once: its validation mean-square error; beside a fitted
-    # nominal a re-fit is no verdict, and `none` is the reference's (the re-fit's
-    # when it is the reference)
-    tried = {c.effect: c.gap_after**2 for c in att.candidates}
-    none = att.gap_before**2
-    if att.tests.get("reference", {}).get("fitted_nominal", False):
-        pm = tried.pop("parameter_mismatch")
-        none = pm if att.reference == "refit" else none
-    mse = {"none": none} | tried
-    n_eff = _evidence_samples(att, mse)
+    tried = _tried(att)
+    mse = {k: v[0] for k, v in tried.items()}
+    n_eff = _evidence_samples(att, tried)
     return GapDiagnosis(
         effect=att.effect,
         probabilities=probabilities(att.effect, mse, n_eff, att.shrink),

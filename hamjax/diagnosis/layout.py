@@ -383,8 +383,8 @@ class Prepared:
     w_est: np.ndarray  # nominal output on the estimation record
     w_val: np.ndarray
     u_val: np.ndarray  # nominal u = F(v) on validation
-    # the nominal is hamjax's own fit (no model.json): the re-fit is then the
-    # reference the effects are judged against (`attribute.reference_row`)
+    # the nominal is hamjax's own fit (no model.json): a re-fit of it is no
+    # verdict, and the reference where it improves on it (`attribute.reference_row`)
     fitted: bool = False
 
 

@@ -33,7 +33,12 @@ import numpy as np
 
 from .._results import RESULTS
 from ..simulation.sharding import effective_chunk
-from .attribute import noise_candidates, reference_residuals, whitening_predictor
+from .attribute import (
+    noise_candidates,
+    reference_residuals,
+    refit_over_nominal,
+    whitening_predictor,
+)
 from .augmented import Row, uses_feedback, uses_memory, uses_table
 from .fit import LAMBDA0, RowFit, fit_batch, theta_std
 from .layout import (
@@ -294,6 +299,8 @@ def run_queue(
             outstanding[c] = len(extra)
         elif item.stage in ("finish", "more") and outstanding[c] == 0:
             fits[c]["theta_std"] = parameter_std(preps[c], fits[c])
+            if preps[c].fitted:  # the reference, once (`attribute` reads it too)
+                fits[c]["reference"] = refit_over_nominal(preps[c], fits[c])
             fits[c]["noise"] = noise_candidates(preps[c], fits[c])  # `attribute` too
             extra = whitening_items(c, preps[c], fits[c])
             if extra:

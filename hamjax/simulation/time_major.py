@@ -131,7 +131,9 @@ def simulate_batch_major(
     """`simulate_time_major` for inputs stored `(batch, time)`, without transposing
     the whole batch: blocks of `block` samples are transposed in cache, scanned, and
     their outputs written over the inputs they came from, in one buffer (no second
-    `(batch, time)` array to fill). With blocks of 20 this is 1.5x the earlier
+    `(batch, time)` array to fill; a length that is not a multiple of `block`
+    still costs the padded copy and the final slice). With blocks of 20 this is
+    1.5x the earlier
     form (a fresh output array, blocks of 50): 239 -> 360 M realisation-samples/s
     on workload 1 of `benchmarks/benchmark_throughput.py`, 2 cores."""
     check_unroll(unroll)

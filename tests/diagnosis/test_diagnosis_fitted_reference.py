@@ -10,7 +10,8 @@ with a 15 % gain error, the same records and nominal twice, only the flag
 model.json) and `none` when it is hamjax's own (the re-fit, the reference there,
 leaves a white residual: no noise model either), with no probability on
 `parameter_mismatch`; an input saturation behind the same fitted nominal is
-still named `saturation`."""
+still named `saturation`. The likelihood rule (`decide`) likewise names the
+re-fit only beside a given nominal."""
 
 import jax.random as jr
 import numpy as np
@@ -61,3 +62,21 @@ def test_the_refit_is_the_reference_beside_a_fitted_nominal():
     assert clipped.effect == "saturation", clipped.tests
     assert clipped.tests["reference"]["fitted_nominal"]
     assert clipped.probabilities["parameter_mismatch"] == 0.0
+
+
+@pytest.mark.slow
+def test_the_likelihood_rule_names_no_refit_beside_a_fitted_nominal():
+    # the same linear records and 15 % gain error, `rule="likelihood"`: the re-fit
+    # is significant against the nominal (named when the nominal is given), but
+    # no verdict beside hamjax's own nominal
+    nominal = hj.Hammerstein(
+        hj.Identity(), hj.DiscreteTransferFunction([0.0, 0.345], A, DT)
+    )
+    lin = _records(jr.key(0), "linear")
+    given, fitted = diagnose_many(
+        [(nominal, DT, *lin)] * 2, fitted=[False, True], rule="likelihood"
+    )
+    assert given.effect == "parameter_mismatch", given.tests
+    assert fitted.effect != "parameter_mismatch", fitted.tests
+    assert fitted.tests["reference"]["fitted_nominal"]
+    assert fitted.probabilities["parameter_mismatch"] == 0.0

@@ -274,7 +274,7 @@ class Attribution:
     r_before: np.ndarray
     y_nominal: np.ndarray
     # what the effects were judged against: "nominal", or "refit" beside
-    # hamjax's own fitted nominal (`reference_row`)
+    # hamjax's own fitted nominal (`reference`)
     reference: str = "nominal"
     fitted: bool = False  # the nominal is hamjax's own fit (no model.json)
 
@@ -568,40 +568,31 @@ def refit_over_nominal(prep: Prepared, fit: dict) -> tuple[int, bool, float]:
     return int(k), ok, z
 
 
-def reference_row(prep: Prepared, fit: dict | None) -> int | None:
-    """The re-fit's row when it is the reference the effects are judged against
-    (module docstring, *Beside a fitted nominal*): beside hamjax's own nominal
-    (`prep.fitted`), when the re-fit improves significantly on it
-    (`refit_over_nominal`); None: the nominal model is the reference."""
-    if not prep.fitted:
-        return None
-    if fit is None:
-        raise ValueError("beside a fitted nominal the reference needs the case's fits")
-    k, ok, _ = refit_over_nominal(prep, fit)
-    return k if ok else None
-
-
-def reference_residuals(
+def reference(
     prep: Prepared, fit: dict | None = None
-) -> tuple[np.ndarray, np.ndarray]:
-    """`(estimation, validation)` residuals of the reference (`reference_row`):
-    the re-fit's where it is the reference beside a fitted nominal, the nominal
-    model's otherwise. `fit` is required beside a fitted nominal."""
+) -> tuple[int | None, np.ndarray, np.ndarray]:
+    """`(row, estimation residual, validation residual)` of the reference the
+    effects are judged against (module docstring, *Beside a fitted nominal*):
+    beside hamjax's own nominal (`prep.fitted`, where `fit` is required) the
+    re-fit's best row when it improves significantly on the nominal
+    (`refit_over_nominal`); otherwise row None and the nominal model's."""
     y_est = np.asarray(prep.arrays.y_est)[: prep.n_est]
     y_val = np.asarray(prep.arrays.y_val)[: prep.n_val]
-    k = reference_row(prep, fit)
-    if k is None:
-        return y_est - prep.w_est, y_val - prep.w_val
-    w_est = np.asarray(fit["y_est"][k])[: prep.n_est]
-    return y_est - w_est, y_val - np.asarray(fit["y_val"][k])[: prep.n_val]
+    if prep.fitted:
+        if fit is None:
+            raise ValueError("beside a fitted nominal the reference needs the fits")
+        k, ok, _ = refit_over_nominal(prep, fit)
+        if ok:
+            w_est = np.asarray(fit["y_est"][k])[: prep.n_est]
+            return k, y_est - w_est, y_val - np.asarray(fit["y_val"][k])[: prep.n_val]
+    return None, y_est - prep.w_est, y_val - prep.w_val
 
 
 def noise_candidates(prep: Prepared, fit: dict | None = None) -> dict[str, Candidate]:
     """The noise-model effects (`drift`, `coloured_noise`): their predictors
-    fitted on the reference's estimation residual (`reference_residuals`: the
-    nominal's, or the re-fit's where it is the reference), scored on its
-    validation one."""
-    noise = noise_fit_numpy(*reference_residuals(prep, fit))
+    fitted on the reference's estimation residual (`reference`: the nominal's,
+    or the re-fit's where it is the reference), scored on its validation one."""
+    noise = noise_fit_numpy(*reference(prep, fit)[1:])
     cands = {}
     for effect in NOISE_NAMES:
         value, err, pname, est_sse = noise[effect]  # a NoisePredictor
@@ -624,21 +615,21 @@ def nominal_noise(
     """The noise model of the higher likelihood on the estimation record (one
     parameter each: no penalty between them), and whether it is significant
     against the white-noise predictor of the reference's validation residual
-    `r_ref` (`reference_residuals`): `(candidate, significant, z)`."""
+    `r_ref` (`reference`): `(candidate, significant, z)`."""
     c = min((cands[e] for e in NOISE_NAMES), key=lambda c: c.est_sse)
     ok, z = significant(r_ref, c.residual, c.gap_after**2)
     return c, ok, z
 
 
 def whitening_predictor(
-    noise: dict[str, Candidate], prep: Prepared, fit: dict | None = None
+    noise: dict[str, Candidate], r_ref: np.ndarray
 ) -> tuple[str, float] | None:
     """`(name, value)` of the case's significant noise predictor (`noise`:
-    `noise_candidates(prep, fit)`), the filter $A(q)$ (`noise_fit.noise_filter`)
-    through which `attribute` judges the deterministic candidates and `schedule`
-    re-fits them by prediction error; None when the reference's residual
-    (`reference_residuals`) has no significant noise model."""
-    c, ok, _ = nominal_noise(noise, reference_residuals(prep, fit)[1])
+    `noise_candidates`), the filter $A(q)$ (`noise_fit.noise_filter`) through
+    which `attribute` judges the deterministic candidates and `schedule` re-fits
+    them by prediction error; None when the reference's validation residual
+    `r_ref` (`reference`) has no significant noise model."""
+    c, ok, _ = nominal_noise(noise, r_ref)
     if not ok:
         return None
     ((name, param),) = c.params.items()
@@ -663,8 +654,8 @@ def attribute(prep: Prepared, fit: dict) -> Attribution:
     if "whitened" in fit:
         cands_pe = deterministic_candidates(prep, fit["whitened"], best_rows)
     # beside a fitted nominal the re-fit is the reference (module docstring)
-    refit_ref = reference_row(prep, fit) is not None
-    r_ref = reference_residuals(prep, fit)[1]
+    k_ref, _, r_ref = reference(prep, fit)
+    refit_ref = k_ref is not None
     # fitted once per case (`schedule.run_queue`); computed here for a caller
     # that did not
     cands.update(fit["noise"] if "noise" in fit else noise_candidates(prep, fit))

@@ -250,8 +250,7 @@ def decide(prep: Prepared, fit: dict) -> Attribution:
     k_tests = len(pairs) - 1
     t_star = threshold(k_tests, ALPHA / 2)
     levels = sorted({level(q) for q in pairs} - {0})
-    named = (0, 0)
-    significant_at: dict[int, tuple[int, int]] = {}
+    significant_at: dict[int, tuple[int, int]] = {}  # each significant level's pair
     per_level: dict[int, dict] = {}
     sse_est = np.sum(e_est**2, axis=-1)
     # a level's best: log-likelihood on both records (the estimation one at the
@@ -286,13 +285,13 @@ def decide(prep: Prepared, fit: dict) -> Attribution:
         entry["significant"] = bool(ok)
         per_level[lev] = entry
         if ok:
-            named = q
             significant_at[lev] = q
-    if prep.fitted and named[0] == i_pm:
+    if prep.fitted:
         # beside hamjax's own nominal a re-fit is no verdict (`attribute`, *Beside
-        # a fitted nominal*): the highest significant level below it, else none
-        lower = [lev for lev in significant_at if lev < 3]
-        named = significant_at[max(lower)] if lower else (0, 0)
+        # a fitted nominal*)
+        significant_at.pop(level((i_pm, 0)), None)
+    # the highest significant level, else the nominal with white noise
+    named = significant_at[max(significant_at)] if significant_at else (0, 0)
     effect = pair_class(*named)
 
     # candidates for the ranking: each class's deterministic simulation, the noise

@@ -384,7 +384,7 @@ class Prepared:
     w_val: np.ndarray
     u_val: np.ndarray  # nominal u = F(v) on validation
     # the nominal is hamjax's own fit (no model.json): a re-fit of it is no
-    # verdict, and the reference where it improves on it (`attribute.reference_row`)
+    # verdict, and the reference where it improves on it (`attribute.reference`)
     fitted: bool = False
 
 

@@ -35,7 +35,7 @@ from .._results import RESULTS
 from ..simulation.sharding import effective_chunk
 from .attribute import (
     noise_candidates,
-    reference_residuals,
+    reference,
     refit_over_nominal,
     whitening_predictor,
 )
@@ -146,7 +146,7 @@ def finishing_items(c: int, prep: Prepared, fits: dict) -> list[Item]:
 def whitening_items(c: int, prep: Prepared, fits: dict) -> list[Item]:
     """The prediction-error fits of case `c`, once its rows are finished: when the
     reference's residual (the nominal's, or the re-fit's beside a fitted nominal:
-    `attribute.reference_residuals`) has a significant noise model ($A(q)$,
+    `attribute.reference`) has a significant noise model ($A(q)$,
     `attribute.whitening_predictor` of `fits["noise"]`), the best rows of the
     re-fit, of the
     `CONTINUE_CLASSES` leading structural classes (by estimation SSE, as in
@@ -160,10 +160,10 @@ def whitening_items(c: int, prep: Prepared, fits: dict) -> list[Item]:
     `residuals.noise_std_differences`, on the reference's estimation residual:
     the nominal's, or the re-fit's beside a fitted nominal).
     None of them when the noise model is not significant."""
-    predictor = whitening_predictor(fits["noise"], prep, fits)
+    _, r_est, r_val = reference(prep, fits)
+    predictor = whitening_predictor(fits["noise"], r_val)
     if predictor is None:
         return []
-    r_est = reference_residuals(prep, fits)[0]
     e_est = predictor_errors(*predictor, r_est)
     sigma, sigma_e = noise_std_differences(r_est), noise_std_differences(e_est)
     ratio = (sigma_e / sigma) ** 2 if sigma > 0 else 1.0

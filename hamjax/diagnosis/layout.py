@@ -188,8 +188,10 @@ def stick_slip_profile(
                 vp, fs[c] + fd[c], fs[c] - fd[c], slide=slot == "slide_jump"
             )
             x = np.asarray(x)[:, :n]
-            if nom.nl_kind != NL_IDENTITY:
+            if nom.nl_kind == NL_BACKLASH:  # a map with memory: row by row
                 x = np.stack([_static_numpy(nom, xi) for xi in x])
+            elif nom.nl_kind != NL_IDENTITY:  # elementwise: every row at once
+                x = _static_numpy(nom, x)
             w = _response_many(linear, x, dt)
             ww = np.einsum("gk,gk->g", w, w)
             g = np.where(ww > 0, w @ y / np.where(ww > 0, ww, 1.0), 0.0)
@@ -398,7 +400,7 @@ def prepare(
     *,
     nominal_uncertainty: float | None = None,
     fitted_nominal: bool = False,
-    profile: bool = True,
+    screens: bool = True,
 ) -> Prepared:
     """Case arrays and candidate rows for `plant` and the two records (`t,v,y` dicts).
 
@@ -407,9 +409,11 @@ def prepare(
     `fitted_nominal`: `plant` is hamjax's own fit (`nominal_fit`, no model.json),
     so starts that re-fit its whole discrete linear block are offered
     (`REFIT_LINEAR`; `n_free_parameters(..., fitted=True)` wide).
-    `profile=False` skips the stick-slip profile of a closed-loop record (the
-    backlash rows then start from their plain starts only): for a caller that
-    fits the re-fit row alone (`nominal_fit`)."""
+    `screens=False` skips the two searches that only place other rows' starts:
+    the stick-slip profile of a closed-loop record (the backlash rows then start
+    from their plain starts only) and the delay screen (`delay_shortlist`; the
+    time-delay rows then try no whole delay): for a caller that fits the re-fit
+    row alone (`nominal_fit`), which neither changes."""
     plant = fold_output_scale(plant)
     nom = describe_nominal(plant)
     n_est, n_val = est["v"].shape[0], val["v"].shape[0]
@@ -442,7 +446,7 @@ def prepare(
         stick_slip=stick_slip_profile(
             nom, plant.linear, dt, np.asarray(v), np.asarray(est["y"]), L
         )
-        if profile and looks_closed_loop(np.asarray(est["y"]), np.asarray(v))
+        if screens and looks_closed_loop(np.asarray(est["y"]), np.asarray(v))
         else (),
         t_dom=float(t_dom),
         refit_linear=bool(fitted_nominal and not nom.is_ct),
@@ -508,13 +512,17 @@ def prepare(
         NL_TABULATED: ("out_scale",),
         NL_BACKLASH: ("out_scale",),
     }.get(nom.nl_kind, ("gain",))
-    taus_tried = delay_shortlist(
-        est["y"],
-        w_est,
-        step=_response_numpy(plant.linear, np.ones(n_est), dt),
-        u0=float(u_est[0]),
-        max_delay=delay_range(t_dom, n_est),
-        t_dom=t_dom,
+    taus_tried = (
+        delay_shortlist(
+            est["y"],
+            w_est,
+            step=_response_numpy(plant.linear, np.ones(n_est), dt),
+            u0=float(u_est[0]),
+            max_delay=delay_range(t_dom, n_est),
+            t_dom=t_dom,
+        )
+        if screens
+        else (0,)
     )
 
     def _row(name, base, start, flip, tau):

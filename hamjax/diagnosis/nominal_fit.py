@@ -95,7 +95,7 @@ def _prepare_structure(dt, record, nl, b, a, n_params, length=None):
     """The re-fit row (`parameter_mismatch`) of `nl` then `B/A` on `record`, and
     its prepared case (`layout.prepare`, padded to `length`)."""
     start = Hammerstein(nl, DiscreteTransferFunction(b, a, dt))
-    prep = prepare(start, dt, record, record, length, n_params, profile=False)
+    prep = prepare(start, dt, record, record, length, n_params, screens=False)
     row = next(r for name, r in prep.rows if name == "parameter_mismatch")
     return prep, row
 

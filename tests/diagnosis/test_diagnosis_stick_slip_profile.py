@@ -2,6 +2,7 @@
 on a PI loop with a sticky valve, simulated by the benchmark's own, independent
 implementation of He et al. (2007) (`papers.gap.control_loops.HeStiction`)."""
 
+import jax.tree_util as jtu
 import numpy as np
 from scipy.signal import lfilter
 
@@ -134,3 +135,25 @@ def _start(row, prep, slot):
     """The physical starting value of `slot` in `row`."""
     j = list(np.asarray(row.idx)).index(slot)
     return prep.arrays.anchor[slot] + prep.arrays.scale[slot] * float(row.theta0[j])
+
+
+def test_screens_off_changes_only_the_rows_the_screens_place():
+    # `prepare(screens=False)` (`nominal_fit`, which fits the re-fit row alone)
+    # skips the stick-slip profile and the delay screen; the re-fit row and the
+    # case arrays it is fitted on are those of the full preparation
+    plant, dt, op, pv = _sticky_loop(0, 1.0, 0.3, noise=0.01)
+    rec = {"t": dt * np.arange(op.shape[0]), "v": op, "y": pv}
+    full = prepare(plant, dt, rec, rec)
+    bare = prepare(plant, dt, rec, rec, screens=False)
+    assert len(full.ctx.stick_slip) == PROFILE_STARTS and bare.ctx.stick_slip == ()
+    taus = lambda p: {int(r.tau) for name, r in p.rows if name == "time_delay"}
+    assert taus(bare) == {0} and len(taus(full)) == 2  # the shortlist keeps two
+    refit = lambda p: next(r for name, r in p.rows if name == "parameter_mismatch")
+    for a, b in zip(
+        jtu.tree_leaves(refit(full)), jtu.tree_leaves(refit(bare)), strict=True
+    ):
+        np.testing.assert_array_equal(a, b)
+    for a, b in zip(
+        jtu.tree_leaves(full.arrays), jtu.tree_leaves(bare.arrays), strict=True
+    ):
+        np.testing.assert_array_equal(a, b)

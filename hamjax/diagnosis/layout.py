@@ -412,8 +412,8 @@ def prepare(
     `screens=False` skips the two searches that only place other rows' starts:
     the stick-slip profile of a closed-loop record (the backlash rows then start
     from their plain starts only) and the delay screen (`delay_shortlist`; the
-    time-delay rows then try no whole delay): for a caller that fits the re-fit
-    row alone (`nominal_fit`), which neither changes."""
+    time-delay rows then try the whole part 0 only): for a caller that fits the
+    re-fit row alone (`nominal_fit`), which neither screen changes."""
     plant = fold_output_scale(plant)
     nom = describe_nominal(plant)
     n_est, n_val = est["v"].shape[0], val["v"].shape[0]

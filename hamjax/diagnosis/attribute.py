@@ -245,6 +245,7 @@ DETERMINISTIC_NAMES = tuple(e.name for e in DETERMINISTIC)
 NOISE_NAMES = ("drift", "coloured_noise")
 EFFECT_SLOT_NAMES = {e.name: tuple(e.slots) for e in DETERMINISTIC if e.slots}
 FRICTION = next(e for e in DETERMINISTIC if e.name == "friction")
+BACKLASH = next(e for e in DETERMINISTIC if e.name == "backlash")
 
 
 @dataclass
@@ -360,7 +361,11 @@ def _params(prep: Prepared, fit: dict, row: int, effect: str) -> dict:
         i = names.index(name)
         if free[i]:
             out[name] = {"value": float(phys[i]), "std": float(std_full[i])}
-    if effect == "backlash" and "slip_jump" not in out:
+    if effect == "backlash":
+        used = {n for n in EFFECT_SLOT_NAMES[effect] if free[names.index(n)]}
+        # where the play sits: "input" (on v) or "output" (on the output of G)
+        out["placement"] = {"value": BACKLASH.placement(used), "std": 0.0}
+    if effect == "backlash" and "slip_jump" not in out and "out_backlash" not in out:
         # a plain play operator: no slip jump (reported, so that a sticky-valve
         # reading sees S and J side by side)
         out["slip_jump"] = {"value": 0.0, "std": 0.0}
@@ -555,14 +560,14 @@ def refit_over_nominal(prep: Prepared, fit: dict) -> tuple[int, bool, float]:
         return fit["reference"]
     sse = finite_sse(fit)
     k = best_row_per_class(prep, sse, validation_sse(prep, fit))["parameter_mismatch"]
-    w = {
-        f: np.asarray(fit[f][k])[:n]
-        for f, n in (("y_est", prep.n_est), ("y_val", prep.n_val))
-    }
-    if not (np.isfinite(sse[k]) and all(np.all(np.isfinite(x)) for x in w.values())):
+    w_est = np.asarray(fit["y_est"][k])[: prep.n_est]
+    w_val = np.asarray(fit["y_val"][k])[: prep.n_val]
+    if not (
+        np.isfinite(sse[k]) and np.isfinite(w_est).all() and np.isfinite(w_val).all()
+    ):
         return int(k), False, -np.inf
     y_val = np.asarray(prep.arrays.y_val)[: prep.n_val]
-    r_pm = y_val - w["y_val"]
+    r_pm = y_val - w_val
     floor = min(noise_floor_hf(r_pm), rms(r_pm))
     ok, z = significant(y_val - prep.w_val, r_pm, floor**2)
     return int(k), ok, z

@@ -2,7 +2,7 @@
 effect in place, each at a parameter slot whose neutral value removes it.
 
 $v \\to$ delay $\\to$ rate limit $\\to$ backlash $\\to$ dead zone $\\to F \\to$ preload
-$\\to$ saturation $\\to$ extra pole $\\to G \\to h$ (output map), and a feedback
+$\\to$ saturation $\\to$ extra pole $\\to G \\to$ output play $\\to h$ (output map), and a feedback
 path from the output of $G$ to its input: $u' = u - f(\\text{velocity}) - \\phi(w)$
 (`friction`, `feedback_nonlinearity`).
 
@@ -43,7 +43,13 @@ from .._linalg import charpoly_adjugate, polymul
 from ..models.nonlinearities.backlash import Backlash, BacklashState
 from ..models.nonlinearities.piecewise_linear import piecewise_linear_map
 from .effects._base import UNIT_MAX, StartContext, unit_raw
-from .effects.backlash import BacklashEffect, slide_init, slide_step, stick_slip_step
+from .effects.backlash import (
+    BacklashEffect,
+    play_step,
+    slide_init,
+    slide_step,
+    stick_slip_step,
+)
 from .effects.dead_zone import DeadZoneEffect, dead_zone
 from .effects.extra_pole import ExtraPoleEffect
 from .effects.feedback_nonlinearity import (
@@ -406,6 +412,31 @@ def input_memory(
     return memory_scan(v, memory_init(v[0], p, case), p, case, table)[1]
 
 
+def output_play_scan(
+    w: Float[Array, " B"],
+    prev: Float[Array, ""],
+    p: Float[Array, " S"],
+    case: CaseArrays,
+) -> tuple[Float[Array, ""], Float[Array, " B"]]:
+    """The play of width `out_backlash` on the output of $G$ from its previous
+    output `prev`: `(last, played)` (chains over blocks like `filter_scan`; at
+    width 0 it returns `w` exactly)."""
+    width = named(p, case)("out_backlash")
+
+    def step(x_prev, wk):
+        x = play_step(x_prev, wk, width)
+        return x, x
+
+    return lax.scan(step, prev, w, unroll=1)
+
+
+def output_memory(
+    w: Float[Array, " L"], p: Float[Array, " S"], case: CaseArrays
+) -> Float[Array, " L"]:
+    """`output_play_scan` from rest (the output of $G$ at rest is 0)."""
+    return output_play_scan(w, jnp.zeros((), w.dtype), p, case)[1]
+
+
 def named(p: Float[Array, " S"], case: CaseArrays) -> Callable[[str], Array]:
     """`at(name)`: the physical value of slot `name` (one index, taken on use)."""
     n_max = case.b_disc.shape[0] - 1
@@ -481,8 +512,9 @@ def simulate_augmented(
     """Output of the augmented model at physical parameters `p`, from rest.
 
     `memory=False` skips the input-memory scan (rate limit, backlash and a
-    backlash nominal), which is exact when the first two are at their neutral
-    values and the map is not a backlash; a traced `memory` that is the same
+    backlash nominal) and the output play, which is exact when the first two
+    and the output play are at their neutral values and the map is not a
+    backlash; a traced `memory` that is the same
     for a whole batch (not mapped over) skips it at run time for that batch.
     `feedback=False` likewise runs the plain filter instead of the feedback loop
     (exact when `friction` and `feedback_nonlinearity` are neutral).
@@ -508,6 +540,7 @@ def simulate_with_filter(
     x = switch(memory, input_memory, lambda v, *_: v, v, p, case, table)
     rest = jnp.zeros(a.shape[0] - 1, v.dtype)
     _, w = linear_part(b, a, static_part(x, p, case, table), rest, p, case, feedback)
+    w = switch(memory, output_memory, lambda w, *_: w, w, p, case)
     return output_part(w, p, case)
 
 
@@ -518,6 +551,8 @@ def simulate_row(
     return simulate_augmented(full_parameters(theta, row, case), row.tau, v, case)
 
 
+# the slots of the scans with memory that `memory=False` skips: the input-memory
+# scan and the output play
 MEMORY_SLOTS = RateLimitEffect.slots + BacklashEffect.slots
 
 
@@ -525,7 +560,7 @@ def uses_memory(
     free: Bool[Array, "*batch S"], nl_kind: Int[Array, "*batch"] | int = NL_IDENTITY
 ) -> Bool[Array, "*batch"]:
     """Whether rows with these free slots, of cases of map kind `nl_kind`, need the
-    input-memory scan (every row of a backlash nominal does)."""
+    input-memory scan or the output play (every row of a backlash nominal does)."""
     n_max = n_max_of(free.shape[-1])
     cols = [slot_index(name, n_max) for name in MEMORY_SLOTS]
     return free[..., cols].any(axis=-1) | (nl_kind == NL_BACKLASH)

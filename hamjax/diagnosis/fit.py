@@ -37,6 +37,7 @@ from .augmented import (
     memory_init,
     memory_scan,
     output_part,
+    output_play_scan,
     simulate_with_filter,
     static_part,
     switch,
@@ -80,15 +81,17 @@ def nominal_mask(row: Row, case: CaseArrays) -> Bool[Array, " P"]:
 
 def _block_model(p, b, a, state, vb, case, memory, table, feedback):
     """One block of the estimation record through the augmented model, from the
-    scans' `state = (memory-scan state, filter state)` (`augmented.memory_scan`
-    and `augmented.memory_init`; `augmented.linear_part`: the feedback loop or
-    the plain filter)."""
-    mem, z = state
+    scans' `state = (memory-scan state, filter state, output play)`
+    (`augmented.memory_scan` and `augmented.memory_init`; `augmented.linear_part`:
+    the feedback loop or the plain filter; `augmented.output_play_scan`, skipped
+    with the memory scan)."""
+    mem, z, played = state
     skip = lambda v, s, *_: (s, v)  # noqa: E731
     mem, x = switch(memory, memory_scan, skip, vb, mem, p, case, table)
     u = static_part(x, p, case, table)
     z, w = linear_part(b, a, u, z, p, case, feedback)
-    return (mem, z), output_part(w, p, case)
+    played, w = switch(memory, output_play_scan, skip, w, played, p, case)
+    return (mem, z, played), output_part(w, p, case)
 
 
 def _coefficients(theta, row, case):
@@ -168,8 +171,13 @@ def _normal_equations(theta, row, case, flags):
     init = lambda p: memory_init(vd[0], p, case)  # noqa: E731
     mem0, dmem0 = jax.vmap(lambda t: jax.jvp(init, (p,), (t,)), out_axes=(None, 0))(dp)
     filt0 = jnp.zeros(a.shape[0] - 1, theta.dtype)
-    state0 = (mem0, filt0)
-    dstate0 = (dmem0, jnp.zeros((P, *filt0.shape), filt0.dtype))
+    # the output play at rest at 0 (`augmented.output_memory`)
+    state0 = (mem0, filt0, jnp.zeros((), theta.dtype))
+    dstate0 = (
+        dmem0,
+        jnp.zeros((P, *filt0.shape), filt0.dtype),
+        jnp.zeros(P, theta.dtype),
+    )
     # the noise filter A(q) on the residual and its Jacobian (P + 1 signals)
     noise0 = (jnp.zeros((P + 1, 2), theta.dtype), jnp.zeros(P + 1, theta.dtype))
 

@@ -645,6 +645,10 @@ def best_row_per_class(
     """`{class name: its row with the lowest estimation SSE}` (first one on ties);
     the finishing stage and the attribution must agree on it.
 
+    A row that frees an `alternative` slot of its effect (the play on the output
+    of G) stands for the class only if it beats the class's best row of the
+    contract's form on both the estimation and the validation SSE.
+
     A row that frees an `extension` slot of its effect (the slip jump of a
     backlash) stands for the class only if it beats the class's best row without
     one by the nested likelihood ratio $(S_0 - S_1) / (S_1 / (n - p_1)) >
@@ -662,8 +666,12 @@ def best_row_per_class(
     on validation. The twin stands for no class."""
     names = slot_names(N_MAX)
     extension = {e.name: [names.index(s) for s in e.extension] for e in DETERMINISTIC}
+    alternative = {
+        e.name: [names.index(s) for s in e.alternative] for e in DETERMINISTIC
+    }
     best: dict[str, int] = {}
     best_ext: dict[str, int] = {}
+    best_alt: dict[str, int] = {}
     threshold = 2.0 * np.log(1.0 / LR_ALPHA)
     twin = [k for k, (name, _) in enumerate(prep.rows) if name == LINEAR_TWIN]
 
@@ -682,8 +690,12 @@ def best_row_per_class(
             k0 = [j for j in twin if np.all(row.free >= prep.rows[j][1].free)]
             if not (k0 and beats(k, k0[0])):
                 continue
-        cols = extension.get(name, [])
-        table = best_ext if any(row.free[i] for i in cols) else best
+        if any(row.free[i] for i in alternative.get(name, [])):
+            table = best_alt
+        elif any(row.free[i] for i in extension.get(name, [])):
+            table = best_ext
+        else:
+            table = best
         if name not in table or sse[k] < sse[table[name]]:
             table[name] = k
     for name, k in best_ext.items():
@@ -691,6 +703,10 @@ def best_row_per_class(
             best[name] = k
             continue
         if beats(k, best[name]):
+            best[name] = k
+    for name, k in best_alt.items():
+        k0 = best.get(name)
+        if k0 is None or (sse[k] < sse[k0] and val_sse[k] < val_sse[k0]):
             best[name] = k
     return best
 

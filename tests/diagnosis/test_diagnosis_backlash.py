@@ -24,7 +24,7 @@ from hamjax.diagnosis.augmented import (
 from hamjax.diagnosis.diagnose import diagnose_many
 from hamjax.diagnosis.effects.backlash import play_step, stick_slip_step
 from hamjax.diagnosis.fit import fit_row
-from hamjax.diagnosis.layout import N_MAX, prepare
+from hamjax.diagnosis.layout import N_MAX, best_row_per_class, prepare
 from hamjax.io import load_model, write_csv, write_json
 
 
@@ -154,16 +154,22 @@ def test_backlash_model_json_diagnosed_through_the_cli(tmp_path, capsys):
     assert r["gap_after"] < 1e-4 * r["gap_before"]
 
 
+def _noise_prep(seed: int, noise_seed: int):
+    """`prepare` of the model.json's G with an identity map on `_records(seed)`,
+    the estimation output standard normal noise (300 samples, padded to 512)."""
+    plant, _ = load_model({**MODEL, "nonlinearity": {"kind": "identity"}})
+    est, val = _records(seed)
+    est["y"] = np.random.default_rng(noise_seed).normal(size=300)
+    return prepare(plant, DT, est, val, length=512)
+
+
 def test_stick_slip_normal_equations_match_finite_differences():
     # J^T J and J^T r of the blocked forward-mode Jacobian against central
     # differences of the simulated residual, at a point of a sticky row away from
     # the slip instants: no sample within 100 steps h of the threshold (the
     # differences see the same slips: the exact model is smooth there). Central
     # differences err by rounding ~ eps/h ~ 1e-10 relative: 1e-6 is ample.
-    plant, _ = load_model({**MODEL, "nonlinearity": {"kind": "identity"}})
-    est, val = _records(2)
-    est["y"] = np.random.default_rng(3).normal(size=300)
-    prep = prepare(plant, DT, est, val, length=512)
+    prep = _noise_prep(2, 3)
     case = prep.arrays
     jump_slot = slot_index("slip_jump", N_MAX)
     row = next(r for n, r in prep.rows if n == "backlash" and r.free[jump_slot])
@@ -224,3 +230,86 @@ def test_sticky_valve_recovered_noise_free():
     assert lo <= (S + J) / 2 < hi, (S, J, lo, hi)
     # noise-free: the residual is rounding (1e-20 of the output's energy)
     assert float(fit.sse_est) < 1e-20 * np.sum(recs[0]["y"] ** 2)
+
+
+def _numpy_play(w, c):
+    """The play operator of total width `c` on `w`, at rest at 0 (a Python loop)."""
+    x, out = 0.0, []
+    for wk in np.asarray(w, float):
+        x = min(max(x, wk - c / 2), wk + c / 2)
+        out.append(x)
+    return np.array(out)
+
+
+def _output_play_row(prep):
+    slot = slot_index("out_backlash", N_MAX)
+    return slot, next(r for n, r in prep.rows if n == "backlash" and r.free[slot])
+
+
+def test_output_play_is_a_play_on_the_filter_output():
+    # the play of width c_o on the output of G (a gear between drive and load),
+    # simulated and through the blocked normal equations (300 samples: two blocks
+    # of `fit.BLOCK`, the play's state carried across) against lfilter and a
+    # Python play; the same operations in another order: 1e-12 of the peak
+    prep = _noise_prep(4, 5)
+    case = prep.arrays
+    slot, row = _output_play_row(prep)
+    est = {"v": np.asarray(case.v_est)[: prep.n_est]}
+    p = full_parameters(row.theta0, row, case).at[slot].set(0.3)
+    got = jax.jit(simulate_augmented)(p, row.tau, case.v_est, case)[: prep.n_est]
+    want = _numpy_play(sg.lfilter(B, A, est["v"]), 0.3)
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-12 * np.abs(want).max())
+    assert np.abs(want - sg.lfilter(B, A, est["v"])).max() > 0.1  # the play acts
+    # the fit's blocked Jacobian (the play's width among its columns)
+    assert_normal_equations_match_differences(row.theta0 + 0.1, row, case, slot)
+
+
+@pytest.mark.slow
+def test_output_play_recovered_noise_free():
+    # a play of width 0.25 on the output of G (a gear behind the drive's lag),
+    # noise-free: named backlash, placed at the output, the width recovered to
+    # the fit's convergence (1e-3) and the gap closed to rounding
+    plant, _ = load_model({**MODEL, "nonlinearity": {"kind": "identity"}})
+    recs = []
+    for i in range(2):
+        v = _staircase(np.random.default_rng([9, i]), 600)
+        y = _numpy_play(sg.lfilter(B, A, v), 0.25)
+        recs.append({"t": np.arange(600) * DT, "v": v, "y": y})
+    (d,) = diagnose_many([(plant, DT, *recs)])
+    assert d.effect == "backlash", (d.effect, d.tests)
+    params = d.ranking[0]["params"]
+    assert params["placement"]["value"] == "output"
+    assert np.isclose(params["out_backlash"]["value"], 0.25, rtol=1e-3), params
+    assert d.gap_after < 1e-4 * d.gap_before
+
+
+def test_output_play_stands_for_backlash_only_when_better_on_both_records():
+    # `best_row_per_class`: the play on the output (`alternative`) replaces the
+    # class's best row of the contract's form (a play on v) only with a lower
+    # estimation SSE and a lower validation SSE
+    plant, _ = load_model({**MODEL, "nonlinearity": {"kind": "identity"}})
+    prep = prepare(plant, DT, *_records(6))
+    out_slot, _ = _output_play_row(prep)
+    names = [n for n, _ in prep.rows]
+    k_out = [
+        k for k, (n, r) in enumerate(prep.rows) if n == "backlash" and r.free[out_slot]
+    ]
+    k_in = [
+        k
+        for k, (n, r) in enumerate(prep.rows)
+        if n == "backlash" and not r.free[out_slot]
+    ]
+    assert len(k_out) == 2 and k_in
+
+    def best(est_out: float, val_out: float) -> int:
+        # the first play on v at 100, the other rows at 1e3
+        sse = np.full(len(names), 1e3)
+        val_sse = np.full(len(names), 1e3)
+        sse[k_out], val_sse[k_out] = 500.0, 500.0  # the other output row: worse
+        sse[k_out[0]], val_sse[k_out[0]] = est_out, val_out
+        sse[k_in[0]], val_sse[k_in[0]] = 100.0, 100.0
+        return best_row_per_class(prep, sse, val_sse)["backlash"]
+
+    assert best(90.0, 90.0) == k_out[0]
+    assert best(90.0, 110.0) == k_in[0]  # better on estimation only
+    assert best(110.0, 90.0) == k_in[0]  # better on validation only

@@ -67,6 +67,12 @@ class AbstractEffect(eqx.Module):
     # one stands for the class only if the likelihood ratio over the class's best
     # simpler row is significant (`layout.best_row_per_class`)
     extension: ClassVar[tuple[str, ...]] = ()
+    # slots of another form of the effect than the contract's (a play on the
+    # output of G, not on v): a row freeing one stands for the class only if it
+    # beats the class's best row of the contract's form on the estimation SSE and
+    # on the validation SSE (`layout.best_row_per_class`; not nested, so no
+    # likelihood ratio: the two have the same number of parameters)
+    alternative: ClassVar[tuple[str, ...]] = ()
     # slots that are a level (an offset) beside the effect, not the effect: the
     # linear twin of a `REFIT_LINEAR` row keeps them free (`layout.LINEAR_TWIN`)
     level: ClassVar[tuple[str, ...]] = ()

@@ -1,5 +1,21 @@
 """`backlash`: a play operator of total width $c$ on $v$ before $F$, with an
-optional stick-slip jump $J$ (a sticky control valve).
+optional stick-slip jump $J$ (a sticky control valve), or a play of width $c_o$ on
+the output $w$ of $G$ (slot `out_backlash`: a gear between a drive and the load
+whose position is measured).
+
+**Where the play sits.** A play on $v$ is the backlash of a valve or of a
+linkage in front of the drive: the load follows a play operator of the command.
+In a servo whose gear lies between the motor (the drive's own lag, part of $G$)
+and a stiff load, the play acts on the motor's position, after the drive's
+dynamics: the "hysteresis model" of gear backlash (Nordin & Gutman 2002)
+on the output of $G$, $y = h(\\mathrm{play}_{c_o}(w))$. The two are not
+interchangeable: after a reversal a play on $v$ holds the input of $G$,
+so the whole response waits until $v$ has crossed the band, while a play on $w$
+lets $G$'s own lag run on and holds only the load. A row frees one placement;
+the output play stands for the class only where it beats the play on $v$ on
+both records (`AbstractEffect.alternative`): in a closed loop a wide play on the
+measured output can follow the estimation record and not the validation one. the report says which (`placement`). The output play
+starts at rest at 0, the output of $G$ at rest.
 
 With $J > 0$ this is the two-parameter stiction model in the form of He, Wang,
 Pottmann & Qin (2007, Fig. 3), in the parameters of Choudhury, Thornhill & Shah
@@ -20,6 +36,13 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from ._base import AbstractEffect, StartContext, scale_span, span
+
+
+def output_span(ctx: StartContext) -> float:
+    """The 2 %-98 % range of the nominal output (never 0): the unit of the output
+    play."""
+    wq = ctx.w_quantiles
+    return max(wq[0.98] - wq[0.02], 1e-12)
 
 
 def play_step(
@@ -105,17 +128,34 @@ def slide_step(
 class BacklashEffect(AbstractEffect):
     """Play of width $c \\ge 0$ (neutral $c = 0$) with a slip jump $J \\ge 0$ (He
     et al.) or a slide jump $J_c \\ge 0$ (Choudhury et al.), neutral $0$ each: the
-    plain play operator."""
+    plain play operator; or a play of width $c_o \\ge 0$ on the output of $G$
+    (`out_backlash`, neutral 0)."""
 
     name = "backlash"
-    slots = ("backlash", "slip_jump", "slide_jump")
-    neutral = {"backlash": 0.0, "slip_jump": 0.0, "slide_jump": 0.0}
-    positive = ("backlash", "slip_jump", "slide_jump")
+    slots = ("backlash", "slip_jump", "slide_jump", "out_backlash")
+    neutral = {
+        "backlash": 0.0,
+        "slip_jump": 0.0,
+        "slide_jump": 0.0,
+        "out_backlash": 0.0,
+    }
+    positive = ("backlash", "slip_jump", "slide_jump", "out_backlash")
     extension = ("slip_jump", "slide_jump")
+    alternative = ("out_backlash",)
 
     def scales(self, ctx: StartContext) -> dict[str, float]:
         unit = 0.05 * scale_span(ctx)
-        return {"backlash": unit, "slip_jump": unit, "slide_jump": unit}
+        return {
+            "backlash": unit,
+            "slip_jump": unit,
+            "slide_jump": unit,
+            "out_backlash": 0.05 * output_span(ctx),
+        }
+
+    def placement(self, free: set[str]) -> str:
+        """Where a row freeing `free` put the play: "output" (`out_backlash`, after
+        $G$) or "input" (on $v$, before $F$)."""
+        return "output" if "out_backlash" in free else "input"
 
     def starts(self, ctx: StartContext) -> list[dict[str, float]]:
         # the plain play at two widths, each with a slip jump of half of it, and
@@ -129,4 +169,6 @@ class BacklashEffect(AbstractEffect):
         profile = [
             {"backlash": S, slot: J, "gain": g} for S, J, g, slot in ctx.stick_slip
         ]
-        return plain + sticky + profile
+        # the play on the output at the same two fractions of the output's range
+        output = [{"out_backlash": f * output_span(ctx)} for f in (0.04, 0.2)]
+        return plain + sticky + profile + output

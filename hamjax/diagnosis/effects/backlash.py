@@ -7,15 +7,17 @@ whose position is measured).
 linkage in front of the drive: the load follows a play operator of the command.
 In a servo whose gear lies between the motor (the drive's own lag, part of $G$)
 and a stiff load, the play acts on the motor's position, after the drive's
-dynamics: the "hysteresis model" of gear backlash (Nordin & Gutman 2002)
-on the output of $G$, $y = h(\\mathrm{play}_{c_o}(w))$. The two are not
-interchangeable: after a reversal a play on $v$ holds the input of $G$,
-so the whole response waits until $v$ has crossed the band, while a play on $w$
-lets $G$'s own lag run on and holds only the load. A row frees one placement;
-the output play stands for the class only where it beats the play on $v$ on
-both records (`AbstractEffect.alternative`): in a closed loop a wide play on the
-measured output can follow the estimation record and not the validation one. the report says which (`placement`). The output play
-starts at rest at 0, the output of $G$ at rest.
+dynamics: the hysteresis model of gear backlash for a stiff transmission
+(Nordin & Gutman 2002; the dead-zone model is the compliant one) at the output
+of $G$, as in Tao & Kokotovic (1995, output backlash):
+$y = h(\\mathrm{play}_{c_o}(w))$. The two are not
+interchangeable: after a reversal a play on $v$ holds the input of $G$, so the
+whole response waits until $v$ has crossed the band, while a play on $w$ lets
+$G$'s own lag run on and holds only the load. A row frees one placement, and the
+report says which (`placement`). The output play stands for the class only where
+it beats the play on $v$ on both records (`AbstractEffect.alternative`): in a
+closed loop a wide play on the measured output can follow the estimation record
+and not the validation one. It starts at rest at 0, the output of $G$ at rest.
 
 With $J > 0$ this is the two-parameter stiction model in the form of He, Wang,
 Pottmann & Qin (2007, Fig. 3), in the parameters of Choudhury, Thornhill & Shah

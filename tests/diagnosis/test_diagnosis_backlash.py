@@ -18,6 +18,7 @@ from hamjax.cli.main import main
 from hamjax.diagnosis.augmented import (
     full_parameters,
     named,
+    output_play_scan,
     simulate_augmented,
     slot_index,
 )
@@ -244,6 +245,29 @@ def _numpy_play(w, c):
 def _output_play_row(prep):
     slot = slot_index("out_backlash", N_MAX)
     return slot, next(r for n, r in prep.rows if n == "backlash" and r.free[slot])
+
+
+def test_output_play_scan_is_the_play_and_exactly_neutral(getkey):
+    # against a `lax.scan` of `play_step` started from `prev` (bit for bit, with
+    # holds); at width 0 the output and its tangent are `w` itself, where the
+    # clamp to [w_k, w_k] would tie in its derivative wherever w holds
+    prep = _noise_prep(4, 5)
+    slot, row = _output_play_row(prep)
+    p0 = full_parameters(row.theta0, row, prep.arrays)
+    w = jnp.repeat(jnp.cumsum(jr.normal(getkey(), (60,))), 5)  # held for 5 samples
+    for width, prev in ((0.7, 0.0), (0.7, 3.0), (2.5, -1.0)):
+        p = p0.at[slot].set(width)
+        last, got = output_play_scan(w, jnp.asarray(prev), p, prep.arrays)
+        want = _scan(play_step, jnp.concatenate([jnp.full(1, prev), w]), width)[1:]
+        assert jnp.array_equal(got, want) and last == want[-1]
+    tw = jr.normal(getkey(), w.shape)
+    neutral = p0.at[slot].set(0.0)
+    y, dy = jax.jvp(
+        lambda w: output_play_scan(w, jnp.zeros(()), neutral, prep.arrays)[1],
+        (w,),
+        (tw,),
+    )
+    assert jnp.array_equal(y, w) and jnp.array_equal(dy, tw)
 
 
 def test_output_play_is_a_play_on_the_filter_output():

@@ -361,16 +361,15 @@ def _params(prep: Prepared, fit: dict, row: int, effect: str) -> dict:
         i = names.index(name)
         if free[i]:
             out[name] = {"value": float(phys[i]), "std": float(std_full[i])}
+    used = set(out)  # the row's free slots of the effect
     if effect == "backlash":
-        used = {n for n in EFFECT_SLOT_NAMES[effect] if free[names.index(n)]}
         # where the play sits: "input" (on v) or "output" (on the output of G)
         out["placement"] = {"value": BACKLASH.placement(used), "std": 0.0}
-    if effect == "backlash" and "slip_jump" not in out and "out_backlash" not in out:
-        # a plain play operator: no slip jump (reported, so that a sticky-valve
-        # reading sees S and J side by side)
-        out["slip_jump"] = {"value": 0.0, "std": 0.0}
+        if not used & {"slip_jump", "out_backlash"}:
+            # a plain play on v: no slip jump (reported, so that a sticky-valve
+            # reading sees S and J side by side)
+            out["slip_jump"] = {"value": 0.0, "std": 0.0}
     if effect == "friction":
-        used = {n for n in EFFECT_SLOT_NAMES[effect] if free[names.index(n)]}
         # which velocity the friction acts on: "output" (s = w) or "derivative"
         out["velocity"] = {"value": FRICTION.velocity(used), "std": 0.0}
     if effect == "time_delay":

@@ -106,6 +106,13 @@ STATIC_BAND_GRID = tuple(0.5 * 2.0 ** (-k / 64) for k in range(362))
 KINETIC_RATIOS = tuple(0.9 * 2.0 ** (-k / 3) for k in range(17))
 PROFILE_CHUNK = 512  # grid points simulated at once (memory: chunk x length)
 PROFILE_STARTS = 2  # best profile points kept as starts of the backlash rows
+# Beside a fitted nominal, passes of the profile's denominator re-fit (variable
+# projection at the best point, then the grid again near it: `stick_slip_profile`)
+# and the window of that local grid, in steps of `STATIC_BAND_GRID` either side
+# (four times as wide on the first pass)
+DENOMINATOR_PASSES = 2
+LOCAL_STEPS = 16
+DENOMINATOR_EVALUATIONS = 100  # residual evaluations of one variable-projection fit
 
 
 def prior_weight(uncertainty: float | None, noise_std: float) -> float:
@@ -160,15 +167,53 @@ def _valve_positions(
 
 
 def stick_slip_profile(
-    nom: "Nominal", linear, dt: float, v: np.ndarray, y: np.ndarray, length: int
-) -> tuple[tuple[float, float, float, str], ...]:
-    r"""The `PROFILE_STARTS` best $(S, J, g, \text{slot})$ over both stick-slip
-    variants (`VARIANTS`: the jump's slot) on the grid `STATIC_BAND_GRID` x
-    `KINETIC_RATIOS` ($S = f_s + f_d$, $J = f_s - f_d$ for both: the same
-    reversal band $S$ and sliding offset $f_d = (S - J)/2$), best first, each
-    scored by the estimation SSE of $y \approx g\,G x(S, J)$ with the nominal
-    linear block $G$ and the gain $g$ by least squares (separable: for fixed
-    $(S, J)$ the model is linear in $g$).
+    nom: "Nominal",
+    linear,
+    dt: float,
+    v: np.ndarray,
+    y: np.ndarray,
+    length: int,
+    *,
+    refit_linear: bool = False,
+) -> tuple[tuple[float, float, dict, str], ...]:
+    r"""The `PROFILE_STARTS` best $(S, J, \text{re-fit start}, \text{slot})$ over
+    both stick-slip variants (`VARIANTS`: the jump's slot) on the grid
+    `STATIC_BAND_GRID` x `KINETIC_RATIOS` ($S = f_s + f_d$, $J = f_s - f_d$ for
+    both: the same reversal band $S$ and sliding offset $f_d = (S - J)/2$), best
+    first.
+
+    Each grid point is scored by separable least squares (Jelali 2008, valve
+    stiction by a global search over the stiction parameters with the linear
+    model fitted by least squares at each point): the estimation SSE of $y
+    \approx \sum_j b_j q^{-j} F(x(S, J)) / A(q)$, the nominal's denominator $A$
+    and map $F$ with a free numerator (`_numerator_lags`), linear in $b$. The
+    nominal's own numerator is not kept: beside a linear nominal fitted on the
+    sticky record itself (no model.json) it has absorbed the valve (the play's
+    lag looks like a slower, smaller response), and scored with it the true
+    $(S, J)$ of a sticky loop lost to a narrower band (measured on the
+    control-loop benchmark). With a piecewise-linear map (which a fitted nominal
+    picks up from the valve too: a dead band looks like one) the identity map is
+    scored as well.
+
+    Beside hamjax's own discrete nominal (`refit_linear`, as
+    `StartContext.refit_linear`) its denominator is no better than its numerator
+    (poles fitted to a valve's limit cycle: a mode near $-1$, a near-integrator),
+    so where the best point keeps the nominal's map (its start can re-fit the
+    linear block) the denominator is re-fitted too, by variable projection there
+    (`_refit_denominator`: the output error over $A$, $b$ by least squares), and
+    the grid scored again with it near that point's $f_s$, within four times
+    `LOCAL_STEPS` (a factor of 2 either way: a wrong $A$ moved the best $f_s$ by
+    a quarter in the tests), then within `LOCAL_STEPS`; up to
+    `DENOMINATOR_PASSES` times while the best SSE falls. There the re-fit
+    start re-fits the whole linear block (`REFIT_LINEAR`) from the fitted $A$ and
+    numerator (its changes `db..`, up to the lag a re-fit moves:
+    `refit_linear_order`) with an output level $c$, fitted with them (slot
+    `out_off`, a level beside the effect: `BacklashEffect.level`; where the
+    record is a slice of a loop's operation, an integrating process's output
+    starts where its level was, not at rest); otherwise it is the gain
+    $\sum b / \sum b_{nom}$ (both over the same $A$: the ratio of static
+    gains; `{"gain": g}`); for the identity map `{"k1": g, "k2": g, "d1": 0,
+    ...}` (the map's slots, which a re-fit frees, carry it).
 
     The exact steps' instants of slip move only with $f_s$ (and $J$), where the
     fit has no derivative; this search places them (and $f_d$ near its value)
@@ -179,42 +224,155 @@ def stick_slip_profile(
     fs = np.repeat(np.asarray(STATIC_BAND_GRID) * vr, len(KINETIC_RATIOS))
     fd = fs * np.tile(np.asarray(KINETIC_RATIOS), len(STATIC_BAND_GRID))
     vp = np.concatenate([v, np.full(length - n, v[-1])])
-    found = []
-    for slot in VARIANTS:
-        sse, gain = np.empty(fs.shape[0]), np.empty(fs.shape[0])
-        for i in range(0, fs.shape[0], PROFILE_CHUNK):
-            c = slice(i, i + PROFILE_CHUNK)
-            x = _valve_positions(
-                vp, fs[c] + fd[c], fs[c] - fd[c], slide=slot == "slide_jump"
-            )
-            x = np.asarray(x)[:, :n]
-            if nom.nl_kind == NL_BACKLASH:  # a map with memory: row by row
-                x = np.stack([_static_numpy(nom, xi) for xi in x])
-            elif nom.nl_kind != NL_IDENTITY:  # elementwise: every row at once
-                x = _static_numpy(nom, x)
-            w = _response_many(linear, x, dt)
-            ww = np.einsum("gk,gk->g", w, w)
-            g = np.where(ww > 0, w @ y / np.where(ww > 0, ww, 1.0), 0.0)
-            sse[c] = np.sum((y[None, :] - g[:, None] * w) ** 2, axis=1)
-            gain[c] = g
-        sse = np.where(np.isfinite(sse), sse, np.inf)
-        best = np.argsort(sse, kind="stable")[:PROFILE_STARTS]
-        found += [(sse[i], fs[i] + fd[i], fs[i] - fd[i], gain[i], slot) for i in best]
-    found.sort(key=lambda f: f[0])  # stable: the He variant first on ties
-    kept = found[:PROFILE_STARTS]  # as many starts as one variant had
-    return tuple((float(S), float(J), float(g), slot) for _, S, J, g, slot in kept)
+    b_nom, a_nom = _discrete_tf(linear, dt)
+    last = refit_linear_order(nom) if refit_linear else b_nom.shape[0] + 1
+    lags = _numerator_lags(b_nom, last)
+    maps = [True] + ([False] if nom.nl_kind == NL_PIECEWISE else [])
+
+    def valves(S, J, slot):  # (G, n), G <= PROFILE_CHUNK padded to it: one shape
+        pad = PROFILE_CHUNK - S.shape[0]
+        S, J = np.pad(S, (0, pad), mode="edge"), np.pad(J, (0, pad), mode="edge")
+        x = _valve_positions(vp, S, J, slide=slot == "slide_jump")
+        return np.asarray(x)[: S.shape[0] - pad, :n]
+
+    def mapped_input(x):  # F(x) of each grid point's valve positions, (G, n)
+        if nom.nl_kind == NL_IDENTITY:
+            return x
+        if nom.nl_kind == NL_BACKLASH:  # a map with memory: row by row
+            return np.stack([_static_numpy(nom, xi) for xi in x])
+        return _static_numpy(nom, x)  # elementwise: every row at once
+
+    def score(a, fs, fd, maps):  # the best points of each variant and map
+        found = []
+        for slot in VARIANTS:
+            sse = {m: np.empty(fs.shape[0]) for m in maps}
+            width = lags.shape[0] + int(refit_linear)
+            b = {m: np.empty((fs.shape[0], width)) for m in maps}
+            for i in range(0, fs.shape[0], PROFILE_CHUNK):
+                c = slice(i, i + PROFILE_CHUNK)
+                x = valves(fs[c] + fd[c], fs[c] - fd[c], slot)
+                for m in maps:  # the valve positions once for both maps
+                    u = lfilter_numpy(_ONE, a, mapped_input(x) if m else x)
+                    sse[m][c], b[m][c] = _free_numerator_sse(
+                        u, y, lags, level=refit_linear
+                    )
+            for m in maps:
+                e = np.where(np.isfinite(sse[m]), sse[m], np.inf)
+                best = np.argsort(e, kind="stable")[:PROFILE_STARTS]
+                found += [
+                    (e[i], fs[i] + fd[i], fs[i] - fd[i], b[m][i], m, slot) for i in best
+                ]
+        found.sort(key=lambda f: f[0])  # stable: the He variant first on ties
+        return found
+
+    a = a_nom
+    found = score(a, fs, fd, maps)
+    for k in range(DENOMINATOR_PASSES if refit_linear else 0):
+        sse0, S0, J0, _, mapped, _ = found[0]
+        if not mapped:  # its start, the map's slots, keeps the nominal's A
+            break
+        u = mapped_input(valves(np.array([S0]), np.array([J0]), found[0][5]))[0]
+        a_new = _refit_denominator(u, y, a, lags, level=True)
+        if a_new is None:
+            break
+        f0 = (S0 + J0) / 2
+        steps = LOCAL_STEPS * (4 if k == 0 else 1)  # the first: A moved f_s
+        near = np.abs(np.log(fs / f0)) <= (steps + 0.5) * np.log(2.0) / 64
+        again = score(a_new, fs[near], fd[near], [True])
+        if not again[0][0] < sse0:
+            break
+        a, found = a_new, again
+    return tuple(
+        (
+            float(S),
+            float(J),
+            _refit_start(b, b_nom, a, lags, mapped, refit_linear),
+            slot,
+        )
+        for _, S, J, b, mapped, slot in found[:PROFILE_STARTS]
+    )
 
 
-def looks_closed_loop(y: np.ndarray, v: np.ndarray) -> bool:
-    """`residuals.feedback_test` of the measured output `y` against `v` (False
-    where it does not apply: a periodic input, a short record). The output, not
-    the nominal's residual: the test's level must not depend on the nominal
-    being right, and the nominal's numerator may have a direct feedthrough."""
-    return bool(feedback_test(y, v).get("closed_loop", False))
+def _refit_denominator(
+    u: np.ndarray, y: np.ndarray, a0: np.ndarray, lags: np.ndarray, *, level=False
+) -> np.ndarray | None:
+    r"""The denominator $A$ (`a[0] = 1`, the order of `a0`) minimising the output
+    error $\|y - \sum_j b_j q^{-l_j} u / A\|^2$ with $b$ at its least squares for
+    each $A$ (variable projection: Golub & Pereyra 1973; `_free_numerator_sse`,
+    with the constant $c$ where `level`), Levenberg-Marquardt from `a0`
+    (`scipy.optimize.least_squares`, at most `DENOMINATOR_EVALUATIONS`
+    residuals). None when it fails, does not lower the
+    error, or leaves a pole outside the unit circle (an integrator's at 1 may
+    stay)."""
+    from scipy.optimize import least_squares
+
+    @np.errstate(over="ignore", invalid="ignore")  # a trial A may be unstable
+    def residual(tail):
+        a = np.r_[1.0, tail]
+        w = lfilter_numpy(_ONE, a, u[None, :])
+        _, b = _free_numerator_sse(w, y, lags, level=level)
+        full = np.zeros(int(lags[-1]) + 1)
+        full[lags] = b[0, : lags.shape[0]]
+        out = y - lfilter_numpy(full, a, u[None, :])[0] - (b[0, -1] if level else 0.0)
+        return np.where(np.isfinite(out), out, 1e150)
+
+    if a0.shape[0] < 2:
+        return None
+    r0 = residual(a0[1:])
+    try:
+        fit = least_squares(
+            residual, a0[1:], method="lm", max_nfev=DENOMINATOR_EVALUATIONS
+        )
+    except (ValueError, np.linalg.LinAlgError):
+        return None
+    a = np.r_[1.0, fit.x]
+    stable = np.all(np.abs(np.roots(a)) <= 1.0 + 1e-9)
+    if not (stable and np.sum(fit.fun**2) < np.sum(r0**2)):
+        return None
+    return a
 
 
-def _response_many(linear, x: np.ndarray, dt: float) -> np.ndarray:
-    """`_response_numpy` of each row of `x` (one `lfilter` call)."""
+_ONE = np.ones(1)
+
+
+def _refit_start(
+    b: np.ndarray,
+    b_nom: np.ndarray,
+    a: np.ndarray,
+    lags: np.ndarray,
+    mapped: bool,
+    linear: bool,
+) -> dict[str, float]:
+    """The re-fit's start of a profile point of fitted numerator `b` (at `lags`)
+    over the denominator `a` (`stick_slip_profile`): in a `REFIT_LINEAR` row
+    (`linear`, with the nominal's map: `mapped`) that denominator, the
+    numerator's changes from the nominal's `b_nom` and the output level (`b`'s
+    last entry, `_free_numerator_sse`'s constant, slot `out_off`); otherwise
+    the ratio of the static gains, or where the point was scored without the
+    nominal's piecewise-linear map, that map at the gain times the identity."""
+    total = float(np.sum(b_nom))
+    g = float(np.sum(b[: lags.shape[0]])) / total if total != 0 else 1.0
+    if not mapped:
+        return {"k1": g, "k2": g, "d1": 0.0, "d2": 0.0, "l1": 0.0, "l2": 0.0}
+    if not linear:
+        return {"gain": g}
+    nom = np.zeros(int(lags[-1]) + 1)
+    k = min(b_nom.shape[0], nom.shape[0])
+    nom[:k] = b_nom[:k]
+    db = {f"db{j}": float(b[i] - nom[j]) for i, j in enumerate(lags)}
+    den = {f"den{j}": float(a[j]) for j in range(1, a.shape[0])}
+    return {REFIT_LINEAR: 1.0, **den, **db, "out_off": float(b[-1])}
+
+
+def refit_linear_order(nom: "Nominal") -> int:
+    """The order of the linear block a `REFIT_LINEAR` row re-fits beside hamjax's
+    own discrete nominal: its numerator's changes `db..` reach this lag."""
+    return max(FITTED_ORDER, nom.den.shape[0] - 1, nom.b.shape[0] - 1)
+
+
+def _discrete_tf(linear, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """`(b, a)` of the linear block in discrete time (a continuous one by zero-order
+    hold), `a[0] = 1`."""
     from scipy import signal
 
     if isinstance(linear, ContinuousTransferFunction):
@@ -223,7 +381,69 @@ def _response_many(linear, x: np.ndarray, dt: float) -> np.ndarray:
         b, a = np.asarray(b[0], float), np.asarray(a, float)
     else:
         b, a = np.asarray(linear.b, float), np.asarray(linear.a, float)
-    return lfilter_numpy(b, a, x)
+    return b / a[0], a / a[0]
+
+
+def _numerator_lags(b: np.ndarray, last: int) -> np.ndarray:
+    """The lags of the profile's free numerator: from the nominal's first nonzero
+    coefficient (its delay: `nominal_fit` gives a closed-loop record $b_0 = 0$,
+    which keeps the controller's reaction to the current noise out of the fit) to
+    `last`."""
+    nz = np.flatnonzero(b)
+    first = int(nz[0]) if nz.size else 0
+    return np.arange(first, max(last, first) + 1)
+
+
+def _free_numerator_sse(
+    u: np.ndarray, y: np.ndarray, lags: np.ndarray, *, level: bool = False
+) -> tuple[np.ndarray, np.ndarray]:
+    """For each row of `u` (`(G, n)`: the input filtered by $1/A$), the least-squares
+    fit of `y` by $\\sum_j b_j u_{k - l_j}$ ($l_j$: `lags`, ascending, from rest),
+    plus a constant $c$ where `level`: `(sse (G,), coefficients (G, lags [+ 1]))`,
+    $c$ last.
+
+    The normal equations from lagged products: $\\sum_k u_{k-a} u_{k-b}$ ($a \\le
+    b$) is the full product at lag $b - a$ less its last $a$ terms, so each lag
+    difference costs one pass over the rows, and the SSE is $y^T y - \\theta^T
+    (X^T y)$ at the solution."""
+    n = y.shape[0]
+    p = lags.shape[0]
+    q = p + int(level)
+    shifted = np.zeros((n, p))  # y_{k + l_j}: U^T y as one matrix product
+    for j, lag in enumerate(lags):
+        shifted[: n - lag, j] = y[lag:]
+    rhs = list((u @ shifted).T)
+    full = {
+        int(d): np.einsum("gk,gk->g", u[:, d:], u[:, : n - d])
+        for d in np.unique(lags[None, :] - lags[:, None])
+        if d >= 0
+    }
+    gram = np.empty((u.shape[0], q, q))
+    for i in range(p):
+        for j in range(i, p):
+            a, b = int(lags[i]), int(lags[j])
+            m = full[b - a]
+            if a > 0:  # the terms past the record's end for the later lag
+                m = m - np.einsum("gk,gk->g", u[:, n - a :], u[:, n - b : n - b + a])
+            gram[:, i, j] = gram[:, j, i] = m
+    if level:
+        for i, lag in enumerate(lags):
+            gram[:, i, p] = gram[:, p, i] = np.sum(u[:, : n - lag], axis=1)
+        gram[:, p, p] = n
+        rhs.append(np.full(u.shape[0], np.sum(y)))
+    rhs = np.stack(rhs, axis=1)
+    ridge = 1e-12 * np.maximum(np.trace(gram, axis1=1, axis2=2), 1e-300) / q
+    coef = np.linalg.solve(gram + ridge[:, None, None] * np.eye(q), rhs[..., None])
+    coef = coef[..., 0]
+    return np.maximum(y @ y - np.einsum("gp,gp->g", coef, rhs), 0.0), coef
+
+
+def looks_closed_loop(y: np.ndarray, v: np.ndarray) -> bool:
+    """`residuals.feedback_test` of the measured output `y` against `v` (False
+    where it does not apply: a periodic input, a short record). The output, not
+    the nominal's residual: the test's level must not depend on the nominal
+    being right, and the nominal's numerator may have a direct feedthrough."""
+    return bool(feedback_test(y, v).get("closed_loop", False))
 
 
 def bucket(n: int) -> int:
@@ -444,7 +664,13 @@ def prepare(
             max(abs(np.quantile(dw, 0.98)), abs(np.quantile(dw, 0.02)), 1e-12)
         ),
         stick_slip=stick_slip_profile(
-            nom, plant.linear, dt, np.asarray(v), np.asarray(est["y"]), L
+            nom,
+            plant.linear,
+            dt,
+            np.asarray(v),
+            np.asarray(est["y"]),
+            L,
+            refit_linear=bool(fitted_nominal and not nom.is_ct),
         )
         if screens and looks_closed_loop(np.asarray(est["y"]), np.asarray(v))
         else (),
@@ -499,7 +725,7 @@ def prepare(
     # order, the gain (which the numerator carries) and the map held at nominal;
     # the nominal's delay, its numerator's leading zeros, stays (`nominal_fit`
     # gives a closed-loop record b0 = 0, the delay that makes it identifiable)
-    n_lin = max(FITTED_ORDER, len(den_free), nom.b.shape[0] - 1)
+    n_lin = refit_linear_order(nom) if not nom.is_ct else FITTED_ORDER
     nonzero = np.flatnonzero(nom.b)
     first_db = int(nonzero[0]) if not nom.is_ct and nonzero.size else 0
     refit_linear = [f"den{j + 1}" for j in range(n_lin)] + list(

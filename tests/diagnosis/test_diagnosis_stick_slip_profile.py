@@ -8,6 +8,7 @@ from scipy.signal import lfilter
 
 import hamjax as hj
 from hamjax.diagnosis.augmented import slot_index
+from hamjax.diagnosis.effects._base import REFIT_LINEAR
 from hamjax.diagnosis.fit import fit_row
 from hamjax.diagnosis.layout import (
     KINETIC_RATIOS,
@@ -15,6 +16,8 @@ from hamjax.diagnosis.layout import (
     PROFILE_STARTS,
     STATIC_BAND_GRID,
     VARIANTS,
+    _free_numerator_sse,
+    _refit_denominator,
     bucket,
     describe_nominal,
     prepare,
@@ -157,3 +160,130 @@ def test_screens_off_changes_only_the_rows_the_screens_place():
         jtu.tree_leaves(full.arrays), jtu.tree_leaves(bare.arrays), strict=True
     ):
         np.testing.assert_array_equal(a, b)
+
+
+def test_free_numerator_least_squares_against_lstsq():
+    # the normal equations from lagged products (`_free_numerator_sse`) against
+    # NumPy's least squares on the explicit lagged regressors, rows of a random
+    # walk plus noise (ill-conditioned like an integrator's x / A), lags with and
+    # without a leading zero, with and without a constant: the SSE and the
+    # coefficients agree to rounding
+    rng = np.random.default_rng([19, 7])
+    G, n = 9, 700
+    u = np.cumsum(rng.standard_normal((G, n)), 1) * 0.05 + rng.standard_normal((G, n))
+    y = rng.standard_normal(n)
+    cases = [(np.array([0, 1, 2, 3]), False), (np.array([1, 2, 3]), False)]
+    cases += [(np.array([2, 5]), False), (np.array([1, 2, 3]), True)]
+    for lags, level in cases:  # `level`: a constant column too
+        sse, coef = _free_numerator_sse(u, y, lags, level=level)
+        for g in range(G):
+            R = np.stack(
+                [np.concatenate([np.zeros(k), u[g, : n - k]]) for k in lags], 1
+            )
+            if level:
+                R = np.column_stack([R, np.ones(n)])
+            ref, *_ = np.linalg.lstsq(R, y, rcond=None)
+            np.testing.assert_allclose(coef[g], ref, rtol=1e-9, atol=1e-12)
+            np.testing.assert_allclose(sse[g], np.sum((y - R @ ref) ** 2), rtol=1e-10)
+
+
+def test_the_profile_is_blind_to_the_nominal_numerator():
+    # the nominal's denominator right, its numerator wrong in gain and shape (a
+    # fitted nominal absorbs the valve so): the profile fits the numerator at
+    # every grid point, so it still finds f_s (as in the first test, two grid
+    # steps); beside a fitted discrete nominal (`refit_linear`) its start re-fits
+    # the linear block from the fitted numerator, which is the true one to 5 % of
+    # its largest coefficient (noise-free: what is left comes from the grid
+    # point's valve, which slips a sample or so off the truth's), elsewhere the
+    # gain alone
+    plant, dt, op, pv = _sticky_loop(0, 1.0, 1.0)
+    fs = 0.08 * np.ptp(op)
+    plant, dt, op, pv = _sticky_loop(0, fs, 0.1 * fs)
+    b, a = np.asarray(plant.linear.b), np.asarray(plant.linear.a)
+    wrong = np.convolve(0.6 * b, [0.2, 0.8])  # a lag spread over two samples
+    nominal = hj.Hammerstein(hj.Identity(), hj.DiscreteTransferFunction(wrong, a, dt))
+    nom = describe_nominal(nominal)
+    step_s = STATIC_BAND_GRID[0] / STATIC_BAND_GRID[1]
+    for refit in (False, True):
+        found = stick_slip_profile(
+            nom, nominal.linear, dt, op, pv, bucket(op.shape[0]), refit_linear=refit
+        )
+        S, J, start, slot = found[0]
+        assert abs(np.log(((S + J) / 2) / fs)) <= 2.0 * np.log(step_s), found
+        if not refit:
+            assert set(start) == {"gain"}
+            continue
+        assert start[REFIT_LINEAR] == 1.0
+        full = np.zeros(N_MAX + 1)
+        full[: wrong.shape[0]] = wrong
+        for k in range(N_MAX + 1):
+            full[k] += start.get(f"db{k}", 0.0)
+        true = np.zeros(N_MAX + 1)
+        true[: b.shape[0]] = b
+        np.testing.assert_allclose(full, true, atol=0.05 * np.abs(b).max())
+
+
+def test_a_piecewise_linear_nominal_is_also_profiled_without_its_map():
+    # a fitted nominal's dead-band map (which the valve's band suggests) in front
+    # of the true process: the profile scores the identity map too, and its best
+    # point is one with the map undone ({"k1": g, "k2": g, "d1": 0, ...}: the
+    # re-fit frees the map's slots), near the truth
+    plant, dt, op, pv = _sticky_loop(1, 1.0, 1.0)
+    fs = 0.15 * np.ptp(op)
+    plant, dt, op, pv = _sticky_loop(1, fs, 0.05 * fs)
+    band = hj.PiecewiseLinear(k1=1.6, k2=1.6, d1=0.3 * fs, d2=-0.3 * fs, l1=0.0, l2=0.0)
+    nominal = hj.Hammerstein(band, plant.linear)
+    found = stick_slip_profile(
+        describe_nominal(nominal), nominal.linear, dt, op, pv, bucket(op.shape[0])
+    )
+    S, J, start, _ = found[0]
+    assert set(start) == {"k1", "k2", "d1", "d2", "l1", "l2"}, found
+    assert start["d1"] == start["d2"] == start["l1"] == start["l2"] == 0.0
+    # the gain at the grid point, within 1 % of the truth's 1 (noise-free)
+    assert np.isclose(start["k1"], 1.0, rtol=0.01) and start["k1"] == start["k2"]
+    step_s = STATIC_BAND_GRID[0] / STATIC_BAND_GRID[1]
+    assert abs(np.log(((S + J) / 2) / fs)) <= 2.0 * np.log(step_s), found
+
+
+def test_the_denominator_refit_recovers_an_output_error_model():
+    # variable projection (`_refit_denominator`) on a noise-free second-order
+    # output-error record, from poles 10 % off: the true denominator to 1e-6
+    rng = np.random.default_rng([19, 8])
+    u = np.repeat(rng.standard_normal(100), 10)
+    b, a = np.array([0.0, 0.05, 0.03]), np.array([1.0, -1.6, 0.68])
+    y = lfilter(b, a, u)
+    a0 = np.real(np.poly(0.9 * np.roots(a)))
+    found = _refit_denominator(u, y, a0, np.array([1, 2]))
+    np.testing.assert_allclose(found, a, atol=1e-6)
+    # an error that cannot fall (the start is the optimum already) gives None
+    assert _refit_denominator(u, y, a, np.array([1, 2])) is None
+
+
+def test_beside_a_fitted_nominal_the_profile_refits_the_denominator():
+    # a fitted nominal's poles wrong too (moved by 10 %, as a valve's limit cycle
+    # moves a fitted nominal's), numerator and all: `refit_linear` re-fits the
+    # denominator at the best point and scores the grid near it again, so the
+    # start carries the true denominator (to 5 % of its largest coefficient, as
+    # the numerator above) and f_s stays within two grid steps
+    plant, dt, op, pv = _sticky_loop(0, 1.0, 1.0)
+    fs = 0.08 * np.ptp(op)
+    plant, dt, op, pv = _sticky_loop(0, fs, 0.1 * fs)
+    b, a = np.asarray(plant.linear.b), np.asarray(plant.linear.a)
+    a_wrong = np.real(np.poly(np.roots(a) ** 1.5))  # slower poles, 1.5 x the time
+    nominal = hj.Hammerstein(
+        hj.Identity(), hj.DiscreteTransferFunction(0.6 * b, a_wrong, dt)
+    )
+    found = stick_slip_profile(
+        describe_nominal(nominal),
+        nominal.linear,
+        dt,
+        op,
+        pv,
+        bucket(op.shape[0]),
+        refit_linear=True,
+    )
+    S, J, start, _ = found[0]
+    step_s = STATIC_BAND_GRID[0] / STATIC_BAND_GRID[1]
+    assert abs(np.log(((S + J) / 2) / fs)) <= 2.0 * np.log(step_s), found
+    den = np.array([1.0] + [start.get(f"den{j}", 0.0) for j in range(1, a.shape[0])])
+    np.testing.assert_allclose(den, a, atol=0.05 * np.abs(a).max())

@@ -25,8 +25,9 @@ class StartContext(eqx.Module):
     u_std: float
     w_quantiles: dict  # quantile level -> value of the nominal output w
     dw_half: float  # half range of the nominal output's rate dw/dt (2 %/98 % rule)
-    # (S, J, gain, jump slot) of the stick-slip variants that fit the estimation record
-    # best on a grid (`layout.stick_slip_profile`), best first; empty when not computed
+    # (S, J, re-fit start, jump slot) of the stick-slip variants that fit the
+    # estimation record best on a grid (`layout.stick_slip_profile`), best first;
+    # empty when not computed
     stick_slip: tuple = ()
     # the nominal linear block's slowest time constant in samples
     # (`time_delay.dominant_time_constant`; inf when not stable, 0 without a pole)

@@ -144,6 +144,9 @@ class BacklashEffect(AbstractEffect):
     positive = ("backlash", "slip_jump", "slide_jump", "out_backlash")
     extension = ("slip_jump", "slide_jump")
     alternative = ("out_backlash",)
+    # the profile's starts beside a fitted nominal free an output level
+    # (`layout.stick_slip_profile`), which their linear twin frees too
+    level = ("out_off",)
 
     def scales(self, ctx: StartContext) -> dict[str, float]:
         unit = 0.05 * scale_span(ctx)
@@ -165,11 +168,12 @@ class BacklashEffect(AbstractEffect):
         # (`ctx.stick_slip`, its jump's slot named; the slide only there): the
         # exact step gives f_s no derivative, and the tangents of S and J are
         # opposite (both reach x only through f_d), so a fit moves f_d at about
-        # the f_s it starts from; the profile's gain starts the re-fit's gain
+        # the f_s it starts from; the profile's gain (or identity map) starts the
+        # re-fit's
         plain = [{"backlash": 0.04 * span(ctx)}, {"backlash": 0.2 * span(ctx)}]
         sticky = [{**s, "slip_jump": 0.5 * s["backlash"]} for s in plain]
         profile = [
-            {"backlash": S, slot: J, "gain": g} for S, J, g, slot in ctx.stick_slip
+            {"backlash": S, slot: J, **refit} for S, J, refit, slot in ctx.stick_slip
         ]
         # the play on the output at the same two fractions of the output's range
         output = [{"out_backlash": f * output_span(ctx)} for f in (0.04, 0.2)]

@@ -943,6 +943,16 @@ def refits_linear(row: Row) -> bool:
     return any(row.free[names.index(n)] for n in numerator_slots(N_MAX))
 
 
+def starts_at_nominal_numerator(row: Row) -> bool:
+    """Whether a `refits_linear` row starts at the nominal's numerator (every
+    change `db..` at 0), far from its own optimum, rather than at a fitted one
+    (the stick-slip profile's starts, `stick_slip_profile`)."""
+    names = slot_names(N_MAX)
+    numerator = {names.index(n) for n in numerator_slots(N_MAX)}
+    idx, theta0 = np.asarray(row.idx), np.asarray(row.theta0)
+    return not any(theta0[j] != 0 for j, i in enumerate(idx) if int(i) in numerator)
+
+
 def n_free_parameters(plant: Hammerstein, *, fitted: bool = False) -> int:
     """Width of the compact parameter vector this plant's rows need; `fitted`:
     the plant is hamjax's own discrete fit, whose `REFIT_LINEAR` row frees the

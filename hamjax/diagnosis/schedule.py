@@ -46,6 +46,7 @@ from .layout import (
     best_row_per_class,
     finite_sse,
     refits_linear,
+    starts_at_nominal_numerator,
     validation_sse,
 )
 from .noise_fit import noise_filter, predictor_errors
@@ -123,14 +124,17 @@ def finishing_items(c: int, prep: Prepared, fits: dict) -> list[Item]:
       beside hamjax's own nominal), continued to the budget of the nominal fit,
       which fits the same block (`nominal_fit.NOMINAL_STEPS`), whatever its
       class's rank: it starts at the linear fit's numerator, far from its own
-      optimum, so a few screening steps cannot rank it.
+      optimum, so a few screening steps cannot rank it. Not a row that starts at
+      a fitted numerator (`layout.starts_at_nominal_numerator`: the stick-slip
+      profile's), which is ranked and continued as any other.
     """
     sse, _, i_pm, best, lead = leading_rows(prep, fits)
     used = np.asarray(prep.rows[i_pm][1].idx) < prep.arrays.anchor.shape[0]
+    far = lambda r: refits_linear(r) and starts_at_nominal_numerator(r)  # noqa: E731
     budget = lambda k: (  # noqa: E731
-        NOMINAL_STEPS - SCREEN_STEPS if refits_linear(prep.rows[k][1]) else FINISH_STEPS
+        NOMINAL_STEPS - SCREEN_STEPS if far(prep.rows[k][1]) else FINISH_STEPS
     )
-    linear = [k for k, (_, r) in enumerate(prep.rows) if refits_linear(r)]
+    linear = [k for k, (_, r) in enumerate(prep.rows) if far(r)]
     out = [
         Item(c, k, fits["theta"][k], LAMBDA0, budget(k), "finish", "stopped")
         for k in dict.fromkeys([i_pm, *lead, *linear])

@@ -21,6 +21,8 @@ from hamjax.diagnosis.layout import (
     bucket,
     describe_nominal,
     prepare,
+    refits_linear,
+    starts_at_nominal_numerator,
     stick_slip_profile,
 )
 from hamjax.papers.gap import control_loops as cl
@@ -287,3 +289,20 @@ def test_beside_a_fitted_nominal_the_profile_refits_the_denominator():
     assert abs(np.log(((S + J) / 2) / fs)) <= 2.0 * np.log(step_s), found
     den = np.array([1.0] + [start.get(f"den{j}", 0.0) for j in range(1, a.shape[0])])
     np.testing.assert_allclose(den, a, atol=0.05 * np.abs(a).max())
+
+
+def test_the_profile_starts_are_not_continued_as_far_from_their_optimum():
+    # beside a fitted discrete nominal the profile's starts re-fit the linear block
+    # from the fitted numerator (`db..` set): `starts_at_nominal_numerator` tells
+    # them from the rows that start at the nominal's numerator (the sign-blind
+    # sensor's, the linear twins), which alone the finishing stage continues to
+    # the nominal fit's budget
+    plant, dt, op, pv = _sticky_loop(0, 1.0, 0.3, noise=0.01)
+    rec = {"t": dt * np.arange(op.shape[0]), "v": op, "y": pv}
+    prep = prepare(plant, dt, rec, rec, fitted_nominal=True)
+    linear = [(n, r) for n, r in prep.rows if refits_linear(r)]
+    profiled = [r for n, r in linear if n == "backlash"]
+    others = [r for n, r in linear if n != "backlash"]
+    assert len(profiled) == PROFILE_STARTS and others
+    assert not any(starts_at_nominal_numerator(r) for r in profiled)
+    assert all(starts_at_nominal_numerator(r) for r in others)

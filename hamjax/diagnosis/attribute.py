@@ -244,6 +244,9 @@ THROUGH_NOISE = True  # judge the gap through the noise predictor too (docstring
 DETERMINISTIC_NAMES = tuple(e.name for e in DETERMINISTIC)
 NOISE_NAMES = ("drift", "coloured_noise")
 EFFECT_SLOT_NAMES = {e.name: tuple(e.slots) for e in DETERMINISTIC if e.slots}
+# each effect's level slots (an offset beside it, which may be another effect's
+# slot: the backlash's output level), reported with the re-fit
+LEVEL_SLOT_NAMES = {e.name: tuple(e.level) for e in DETERMINISTIC}
 FRICTION = next(e for e in DETERMINISTIC if e.name == "friction")
 BACKLASH = next(e for e in DETERMINISTIC if e.name == "backlash")
 
@@ -378,8 +381,9 @@ def _params(prep: Prepared, fit: dict, row: int, effect: str) -> dict:
         out["tau_samples"] = {"value": tau, "std": std}
         out["tau_seconds"] = {"value": tau * prep.ctx.dt, "std": std * prep.ctx.dt}
     refit = {}
+    level = set(LEVEL_SLOT_NAMES.get(effect, ())) - used
     for i, name in enumerate(names):
-        if free[i] and name not in EFFECT_SLOTS:
+        if free[i] and (name not in EFFECT_SLOTS or name in level):
             refit[name] = {"value": float(phys[i]), "std": float(std_full[i])}
     out["nominal_refit"] = refit
     return out

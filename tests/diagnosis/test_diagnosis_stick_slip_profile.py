@@ -7,7 +7,8 @@ import numpy as np
 from scipy.signal import lfilter
 
 import hamjax as hj
-from hamjax.diagnosis.augmented import slot_index
+from hamjax.diagnosis.attribute import _params
+from hamjax.diagnosis.augmented import slot_index, slot_names
 from hamjax.diagnosis.effects._base import REFIT_LINEAR
 from hamjax.diagnosis.fit import fit_row
 from hamjax.diagnosis.layout import (
@@ -306,3 +307,23 @@ def test_the_profile_starts_are_not_continued_as_far_from_their_optimum():
     assert len(profiled) == PROFILE_STARTS and others
     assert not any(starts_at_nominal_numerator(r) for r in profiled)
     assert all(starts_at_nominal_numerator(r) for r in others)
+
+
+def test_the_output_level_of_a_profile_start_is_reported_with_the_refit():
+    # the output level that the profile's starts free beside a fitted nominal (a
+    # level of the backlash class, another effect's slot) is a fitted parameter:
+    # `attribute._params` reports it with the re-fit's, as it does the denominator
+    plant, dt, op, pv = _sticky_loop(0, 1.0, 0.3, noise=0.01)
+    rec = {"t": dt * np.arange(op.shape[0]), "v": op, "y": pv}
+    prep = prepare(plant, dt, rec, rec, fitted_nominal=True)
+    k = next(
+        i for i, (n, r) in enumerate(prep.rows) if n == "backlash" and refits_linear(r)
+    )
+    names = slot_names(N_MAX)
+    phys = np.zeros((len(prep.rows), len(names)))
+    phys[k, names.index("out_off")] = 0.7
+    width = np.asarray(prep.rows[k][1].idx).shape[0]
+    fit = {"params": phys, "theta_std": np.zeros((len(prep.rows), width))}
+    out = _params(prep, fit, k, "backlash")
+    assert out["nominal_refit"]["out_off"]["value"] == 0.7
+    assert "den1" in out["nominal_refit"] and "out_off" not in out

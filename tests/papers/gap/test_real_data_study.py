@@ -50,6 +50,19 @@ def test_study_diagnoses_and_skips_without_stopping(tmp_path):
     assert "ball_beam" in (out / "table.md").read_text()
 
 
+def test_a_data_folder_without_any_dataset_is_a_user_error(tmp_path, capsys):
+    # a wrong --data (or ../shared absent) used to give an empty table and exit 0
+    out = tmp_path / "out"
+    code = study_main(
+        "real-data-gap", ["--data", str(tmp_path / "nothing"), "--out", str(out)]
+    )
+    assert code == 2
+    err = capsys.readouterr().err.strip()
+    assert "nothing: no real dataset found there" in err
+    assert len(err.splitlines()) == 1
+    assert not (out / "table.md").exists()
+
+
 def test_a_subset_of_cases_is_selected_by_name():
     from hamjax.papers.gap.studies.real_data_gap import select_cases
 

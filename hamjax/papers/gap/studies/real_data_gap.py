@@ -4,6 +4,7 @@
 import time
 from pathlib import Path
 
+from ...._errors import UserInputError
 from ....montecarlo.registry import StudyOption, option_values
 
 
@@ -61,6 +62,12 @@ def run(key, *, realisations, chunk, out, quiet, args) -> dict:
     out = Path(out)
     opts = option_values(args, OPTIONS)
     notes = write_real_cases(opts.data, out / "cases", stiction_loops=realisations)
+    if not notes:  # an empty table is no result
+        raise UserInputError(
+            f"--data {opts.data}: no real dataset found there (folders such as "
+            "cascaded_tanks/, ced_coupled_drives/, emps/, silverbox/): give the "
+            "folder ../shared/data/real"
+        )
     names = select_cases(sorted(notes), opts.cases)
     start = time.perf_counter()
     read, skipped = {}, {}

@@ -29,6 +29,14 @@ def _add_xla_flag(flag: str) -> None:
 _DEVICES_FLAG = "--xla_force_host_platform_device_count"
 
 
+def host_cores() -> int:
+    """The CPU cores this process may run on."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
+
+
 def split_cpu_into_devices() -> None:
     """Expose each CPU core as a JAX device, so work sharded over devices (the
     diagnosis's batched fits) runs on every core.
@@ -41,10 +49,7 @@ def split_cpu_into_devices() -> None:
 
     if xb.backends_are_initialized():
         return
-    try:
-        cores = len(os.sched_getaffinity(0))
-    except AttributeError:  # not on Linux
-        cores = os.cpu_count() or 1
+    cores = host_cores()
     if cores > 1:
         _add_xla_flag(f"{_DEVICES_FLAG}={cores}")
 

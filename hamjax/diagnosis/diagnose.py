@@ -4,12 +4,14 @@ shrinks once that effect is added (the contract `../shared/contracts/gap-case.md
 import functools as ft
 from collections import defaultdict
 from collections.abc import Callable, Iterable, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import equinox as eqx
 import jax
 import numpy as np
 
+from .._runtime import host_cores
 from ..models import DiscreteTransferFunction, Hammerstein, PiecewiseLinear
 from .attribute import Attribution, attribute
 from .decide import decide
@@ -313,17 +315,14 @@ def diagnose_many(
     overlap = ft.cache(ft.partial(compile_in_background, lengths))
     out: list = [None] * len(items)
     for group, members in groups.items():
-        length = padded[group]
-        preps = [
-            prepare(
-                *items[i],  # type: ignore[arg-type]
-                length,
-                n_params,
-                nominal_uncertainty=nominal_uncertainty,
-                fitted_nominal=fitted[i],
-            )
-            for i in members
-        ]
+        # one case per core at a time: `prepare`'s heavy work (the stick-slip
+        # profile's scans, filters and products) runs outside the GIL, and each
+        # case's rows are its own, the same on any number of threads
+        one = ft.partial(
+            _prepare_one, items, padded[group], n_params, nominal_uncertainty, fitted
+        )
+        with ThreadPoolExecutor(min(host_cores(), len(members))) as pool:
+            preps = list(pool.map(one, members))
 
         def finished(j: int, fit: dict, preps=preps, members=members) -> None:
             i = members[j]
@@ -336,6 +335,17 @@ def diagnose_many(
 
         run_queue(preps, batch_size(preps, cases_per_batch), finished, overlap)
     return out
+
+
+def _prepare_one(items, length, n_params, nominal_uncertainty, fitted, i):
+    """`layout.prepare` of case `i` of `diagnose_many`'s `items`."""
+    return prepare(
+        *items[i],
+        length,
+        n_params,
+        nominal_uncertainty=nominal_uncertainty,
+        fitted_nominal=fitted[i],
+    )
 
 
 def diagnose_gap(

@@ -141,6 +141,29 @@ def prior_weight(uncertainty: float | None, noise_std: float) -> float:
 VARIANTS = ("slip_jump", "slide_jump")
 
 
+def _valve_step(slide: bool, width, jump):
+    """The step `((x_prev, y, slide state), v_k) -> (v_k, y_k, state)` of the
+    stick-slip play (`stick_slip_step`) or, for `slide`, Choudhury's valve
+    (`slide_step`), elementwise over a grid of (S, J)."""
+
+    def step(carry, vk):
+        x_prev, y, ss = carry
+        if slide:
+            y, ss = slide_step(y, ss, x_prev, vk, width, jump)
+        else:
+            y = stick_slip_step(y, vk, width, jump)
+        return vk, y, ss
+
+    return step
+
+
+def _valve_init(v0, width):
+    """`_valve_step`'s carry at the start: at rest at $v_0$, as in the augmented
+    model (`augmented.memory_init`)."""
+    x0 = jnp.full(width.shape, v0)
+    return v0, x0, slide_init(x0)
+
+
 @partial(jax.jit, static_argnames="slide")
 def _valve_positions(
     v: Float[Array, " L"],
@@ -149,21 +172,119 @@ def _valve_positions(
     *,
     slide: bool,
 ) -> Float[Array, "G L"]:
-    """The stick-slip play (`stick_slip_step`) or, for `slide`, Choudhury's valve
-    (`slide_step`) of each (S, J) over `v`, started at $v_0$ as in the augmented
-    model (`augmented.memory_init`). One scan over time with the grid as its
-    state's vector (three times faster than a scan per grid point under `vmap`)."""
-    x0 = jnp.full(width.shape, v[0])
+    """The valve positions of each (S, J) over `v` (`_valve_step`). One scan over
+    time with the grid as its state's vector (three times faster than a scan per
+    grid point under `vmap`)."""
+    step = _valve_step(slide, width, jump)
 
-    def step(carry, vk):
-        x_prev, y, ss = carry
-        if slide:
-            y, ss = slide_step(y, ss, x_prev, vk, width, jump)
-        else:
-            y = stick_slip_step(y, vk, width, jump)
-        return (vk, y, ss), y
+    def body(carry, vk):
+        carry = step(carry, vk)
+        return carry, carry[1]
 
-    return lax.scan(step, (v[0], x0, slide_init(x0)), v)[1].T
+    return lax.scan(body, _valve_init(v[0], width), v)[1].T
+
+
+PROFILE_BLOCK = 512  # time steps per call of `_profile_block`: one compilation
+
+
+@partial(jax.jit, static_argnames=("slide", "mapped"))
+def _profile_block(
+    carry: tuple,
+    v: Float[Array, " B"],
+    y: Float[Array, " B"],
+    mask: Float[Array, " B"],
+    width: Float[Array, " G"],
+    jump: Float[Array, " G"],
+    a: Float[Array, " na1"],
+    pl: Float[Array, " 6"],
+    *,
+    slide: bool,
+    mapped: tuple[bool, ...],
+) -> tuple:
+    """`_profile_sums`' scan over one block of time steps from `carry` (the
+    valve's carry, the filter's state `(na, M, G)`, the lagged inputs `(D, M,
+    G)` and the three sums `(D, D, M, G)`, `(D, M, G)`, `(D, M, G)`); the carry
+    after it."""
+    step = _valve_step(slide, width, jump)
+    zeros = jnp.zeros((len(mapped),) + width.shape)
+
+    def body(carry, inputs):
+        valve, z, w, gram, rhs, total = carry
+        vk, yk, mk = inputs
+        valve = step(valve, vk)
+        x = valve[1]
+        u = jnp.stack(
+            [piecewise_linear_map(x, *pl, xp=jnp) if m else x for m in mapped]
+        )
+        out = u + z[0]  # direct form II transposed, b = [1]
+        z = jnp.concatenate([z[1:], zeros[None]]) - a[1:, None, None] * out[None]
+        w = jnp.concatenate([out[None], w[:-1]])  # (depth, M, G): u_{k - i}
+        gram = gram + mk * w[:, None] * w[None, :]
+        return (valve, z, w, gram, rhs + (mk * yk) * w, total + mk * w), None
+
+    return lax.scan(body, carry, (v, y, mask))[0]
+
+
+def _profile_sums(
+    v: np.ndarray,
+    y: np.ndarray,
+    width: np.ndarray,
+    jump: np.ndarray,
+    a: np.ndarray,
+    pl: np.ndarray,
+    *,
+    slide: bool,
+    mapped: tuple[bool, ...],
+    depth: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    r"""The lagged sums of the profile's least squares (`_free_numerator_sse`)
+    for each (S, J) and each map of `mapped` (True: the nominal's
+    piecewise-linear map `pl`, `piecewise_linear_map`; False: the identity),
+    `(gram (M, G, D, D), rhs (M, G, D), total (M, G, D))`, $D$ = `depth`.
+
+    One scan over time (`_profile_block`, `PROFILE_BLOCK` steps a call, the
+    record padded to whole blocks) that never holds a grid x time array: the
+    valve (`_valve_step`, at rest at $v_0$), its input $u = F(x)$ filtered by
+    $1/A$ ($a_0 = 1$, direct form II transposed from rest, as `lfilter_numpy`)
+    and, with $w_i = u_{k-i}$ for the lags $i < D$ (zero before the start), the
+    sums over the record of $w_i w_j$, $w_i y_k$ and $w_i$. As separate passes
+    over a grid x time array the profile was memory-bound; this way it is
+    compute-bound (and runs on every core: `diagnose_many`'s threads)."""
+    n, B = v.shape[0], PROFILE_BLOCK
+    total_len = -(-n // B) * B
+    vp = np.concatenate([v, np.full(total_len - n, v[-1])])
+    yp = np.concatenate([y, np.zeros(total_len - n)])
+    mask = (np.arange(total_len) < n).astype(float)
+    if a.shape[0] < 2:  # A = 1: one zero coefficient keeps the state's shape
+        a = np.r_[a, 0.0]
+    shape = (len(mapped), width.shape[0])
+    carry = (
+        _valve_init(v[0], width),
+        np.zeros((a.shape[0] - 1, *shape)),
+        np.zeros((depth, *shape)),
+        np.zeros((depth, depth, *shape)),
+        np.zeros((depth, *shape)),
+        np.zeros((depth, *shape)),
+    )
+    for k in range(0, total_len, B):
+        carry = _profile_block(
+            carry,
+            vp[k : k + B],
+            yp[k : k + B],
+            mask[k : k + B],
+            width,
+            jump,
+            a,
+            pl,
+            slide=slide,
+            mapped=mapped,
+        )
+    gram, rhs, total = (np.asarray(x) for x in carry[3:])
+    return (
+        np.moveaxis(gram, (2, 3), (0, 1)),
+        np.moveaxis(rhs, (1, 2), (0, 1)),
+        np.moveaxis(total, (1, 2), (0, 1)),
+    )
 
 
 def stick_slip_profile(
@@ -215,6 +336,10 @@ def stick_slip_profile(
     gains; `{"gain": g}`); for the identity map `{"k1": g, "k2": g, "d1": 0,
     ...}` (the map's slots, which a re-fit frees, carry it).
 
+    Each chunk of `PROFILE_CHUNK` grid points is scored in one scan over time
+    (`_profile_sums`: the valve, the map, $1/A$ and the lagged sums), the
+    normal equations solved on the host (`_solve_lagged`).
+
     The exact steps' instants of slip move only with $f_s$ (and $J$), where the
     fit has no derivative; this search places them (and $f_d$ near its value)
     before the Levenberg-Marquardt fit, which then moves $f_d$ and the re-fit.
@@ -228,6 +353,9 @@ def stick_slip_profile(
     last = refit_linear_order(nom) if refit_linear else b_nom.shape[0] + 1
     lags = _numerator_lags(b_nom, last)
     maps = [True] + ([False] if nom.nl_kind == NL_PIECEWISE else [])
+    # the maps a scan evaluates itself (`_profile_sums`); a tabulated map or
+    # one with memory goes through the valve positions on the host
+    fused = nom.nl_kind in (NL_IDENTITY, NL_PIECEWISE)
 
     def valves(S, J, slot):  # (G, n), G <= PROFILE_CHUNK padded to it: one shape
         pad = PROFILE_CHUNK - S.shape[0]
@@ -250,7 +378,27 @@ def stick_slip_profile(
             b = {m: np.empty((fs.shape[0], width)) for m in maps}
             for i in range(0, fs.shape[0], PROFILE_CHUNK):
                 c = slice(i, i + PROFILE_CHUNK)
-                x = valves(fs[c] + fd[c], fs[c] - fd[c], slot)
+                S, J = fs[c] + fd[c], fs[c] - fd[c]
+                if fused:  # both maps in one scan (`_profile_sums`)
+                    pad = PROFILE_CHUNK - S.shape[0]
+                    gram, rhs, total = _profile_sums(
+                        v,
+                        y,
+                        np.pad(S, (0, pad), mode="edge"),
+                        np.pad(J, (0, pad), mode="edge"),
+                        a,
+                        nom.pl,
+                        slide=slot == "slide_jump",
+                        mapped=tuple(m and nom.nl_kind == NL_PIECEWISE for m in maps),
+                        depth=int(lags[-1]) + 1,
+                    )
+                    gram, rhs, total = (g[:, : S.shape[0]] for g in (gram, rhs, total))
+                    for k, m in enumerate(maps):
+                        sse[m][c], b[m][c] = _solve_lagged(
+                            gram[k], rhs[k], total[k], y, lags, level=refit_linear
+                        )
+                    continue
+                x = valves(S, J, slot)
                 for m in maps:  # the valve positions once for both maps
                     u = lfilter_numpy(_ONE, a, mapped_input(x) if m else x)
                     sse[m][c], b[m][c] = _free_numerator_sse(
@@ -431,11 +579,44 @@ def _free_numerator_sse(
             gram[:, i, p] = gram[:, p, i] = np.sum(u[:, : n - lag], axis=1)
         gram[:, p, p] = n
         rhs.append(np.full(u.shape[0], np.sum(y)))
-    rhs = np.stack(rhs, axis=1)
+    return _solve_normal_equations(gram, np.stack(rhs, axis=1), y @ y)
+
+
+def _solve_lagged(
+    gram: np.ndarray,
+    rhs: np.ndarray,
+    total: np.ndarray,
+    y: np.ndarray,
+    lags: np.ndarray,
+    *,
+    level: bool = False,
+) -> tuple[np.ndarray, np.ndarray]:
+    """`_free_numerator_sse` from `_profile_sums` over the lags $0 ..
+    D - 1$ (`(G, D, D)`, `(G, D)`, `(G, D)`) of the rows' filtered inputs: those
+    of `lags`, with the constant where `level`."""
+    p = lags.shape[0]
+    q = p + int(level)
+    g = np.empty((gram.shape[0], q, q))
+    g[:, :p, :p] = gram[:, lags][:, :, lags]
+    r = [rhs[:, lags]]
+    if level:
+        g[:, :p, p] = g[:, p, :p] = total[:, lags]
+        g[:, p, p] = y.shape[0]
+        r.append(np.full((gram.shape[0], 1), np.sum(y)))
+    return _solve_normal_equations(g, np.concatenate(r, axis=1), y @ y)
+
+
+def _solve_normal_equations(
+    gram: np.ndarray, rhs: np.ndarray, yty: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """`(sse (G,), coefficients (G, q))` of the least squares of normal equations
+    `gram` `(G, q, q)`, `rhs` `(G, q)` (a relative ridge of 1e-12 against a
+    singular `gram`): the SSE is $y^T y - \\theta^T (X^T y)$ at the solution."""
+    q = gram.shape[-1]
     ridge = 1e-12 * np.maximum(np.trace(gram, axis1=1, axis2=2), 1e-300) / q
     coef = np.linalg.solve(gram + ridge[:, None, None] * np.eye(q), rhs[..., None])
     coef = coef[..., 0]
-    return np.maximum(y @ y - np.einsum("gp,gp->g", coef, rhs), 0.0), coef
+    return np.maximum(yty - np.einsum("gp,gp->g", coef, rhs), 0.0), coef
 
 
 def looks_closed_loop(y: np.ndarray, v: np.ndarray) -> bool:
@@ -725,7 +906,7 @@ def prepare(
     # order, the gain (which the numerator carries) and the map held at nominal;
     # the nominal's delay, its numerator's leading zeros, stays (`nominal_fit`
     # gives a closed-loop record b0 = 0, the delay that makes it identifiable)
-    n_lin = refit_linear_order(nom) if not nom.is_ct else FITTED_ORDER
+    n_lin = refit_linear_order(nom)
     nonzero = np.flatnonzero(nom.b)
     first_db = int(nonzero[0]) if not nom.is_ct and nonzero.size else 0
     refit_linear = [f"den{j + 1}" for j in range(n_lin)] + list(

@@ -1,5 +1,6 @@
 """`diagnose_many(padding=)`: two tiny cases, each diagnosed in a call of its own
-padded as the whole run, have exactly the numbers of that whole run (with more
+padded as the whole run (and prepared on one thread, the whole run's on
+several), have exactly the numbers of that whole run (with more
 batch-mates the last digits may differ: `hamjax diagnose` splits a run into the
 fixed blocks of `run_blocks`, tested here too)."""
 
@@ -42,9 +43,13 @@ def _same(a, b) -> bool:
 
 
 @pytest.mark.slow
-def test_a_case_alone_with_the_runs_padding_has_the_runs_numbers():
+def test_a_case_alone_with_the_runs_padding_has_the_runs_numbers(monkeypatch):
     items = _items()
+    # the whole run prepares its cases on threads, each case alone on one: the
+    # numbers do not depend on that either
+    monkeypatch.setattr(diagnose_module, "host_cores", lambda: 4)
     whole = diagnose_many(items)
+    monkeypatch.setattr(diagnose_module, "host_cores", lambda: 1)
     pad = run_padding(
         (p, max(e["v"].shape[0], v["v"].shape[0])) for p, _, e, v in items
     )

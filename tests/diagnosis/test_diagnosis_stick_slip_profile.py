@@ -18,7 +18,10 @@ from hamjax.diagnosis.layout import (
     STATIC_BAND_GRID,
     VARIANTS,
     _free_numerator_sse,
+    _profile_sums,
     _refit_denominator,
+    _solve_lagged,
+    _valve_positions,
     bucket,
     describe_nominal,
     prepare,
@@ -26,6 +29,7 @@ from hamjax.diagnosis.layout import (
     starts_at_nominal_numerator,
     stick_slip_profile,
 )
+from hamjax.models.nonlinearities.piecewise_linear import piecewise_linear_map
 from hamjax.papers.gap import control_loops as cl
 
 
@@ -188,6 +192,38 @@ def test_free_numerator_least_squares_against_lstsq():
             ref, *_ = np.linalg.lstsq(R, y, rcond=None)
             np.testing.assert_allclose(coef[g], ref, rtol=1e-9, atol=1e-12)
             np.testing.assert_allclose(sse[g], np.sum((y - R @ ref) ** 2), rtol=1e-10)
+
+
+def test_profile_sums_against_the_host_path():
+    # the fused scan (`_profile_sums`: valve, map, 1/A and the lagged sums in one
+    # pass, over blocks of `PROFILE_BLOCK` steps) against the same least squares
+    # on the host from the valve positions (`_valve_positions`, the map on NumPy,
+    # scipy's lfilter and `_free_numerator_sse`, itself checked against lstsq
+    # above): both variants, both maps, a record that ends inside a block, with
+    # and without the constant. The sums run in another order, so they agree to
+    # rounding relative to the SSE
+    rng = np.random.default_rng([19, 8])
+    n, G = 600, 7  # 600: a block and a part of one
+    v = np.cumsum(rng.standard_normal(n)) * 0.1
+    y = rng.standard_normal(n)
+    S = rng.uniform(0.05, 0.8, G)
+    J = S * rng.uniform(0.0, 0.9, G)
+    a = np.array([1.0, -1.6, 0.7])
+    pl = np.array([1.3, 0.8, 0.1, -0.2, 0.05, -0.1])
+    for slide in (False, True):
+        x = np.asarray(_valve_positions(v, S, J, slide=slide))
+        gram, rhs, total = _profile_sums(
+            v, y, S, J, a, pl, slide=slide, mapped=(True, False), depth=4
+        )
+        for k, u in enumerate([piecewise_linear_map(x, *pl, xp=np), x]):
+            w = lfilter([1.0], a, u, axis=-1)
+            for lags, level in [(np.array([1, 2, 3]), True), (np.arange(4), False)]:
+                sse, coef = _free_numerator_sse(w, y, lags, level=level)
+                sse2, coef2 = _solve_lagged(
+                    gram[k], rhs[k], total[k], y, lags, level=level
+                )
+                np.testing.assert_allclose(sse2, sse, rtol=1e-9)
+                np.testing.assert_allclose(coef2, coef, rtol=1e-8, atol=1e-10)
 
 
 def test_the_profile_is_blind_to_the_nominal_numerator():

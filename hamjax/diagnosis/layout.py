@@ -258,13 +258,13 @@ def _profile_sums(
     if a.shape[0] < 2:  # A = 1: one zero coefficient keeps the state's shape
         a = np.r_[a, 0.0]
     shape = (len(mapped), width.shape[0])
-    carry = (
-        _valve_init(v[0], width),
-        np.zeros((a.shape[0] - 1, *shape)),
-        np.zeros((depth, *shape)),
-        np.zeros((depth, depth, *shape)),
-        np.zeros((depth, *shape)),
-        np.zeros((depth, *shape)),
+    carry = (  # as JAX arrays, as the blocks return it: one compilation
+        _valve_init(jnp.asarray(v[0]), width),
+        jnp.zeros((a.shape[0] - 1, *shape)),
+        jnp.zeros((depth, *shape)),
+        jnp.zeros((depth, depth, *shape)),
+        jnp.zeros((depth, *shape)),
+        jnp.zeros((depth, *shape)),
     )
     for k in range(0, total_len, B):
         carry = _profile_block(

@@ -18,6 +18,7 @@ from hamjax.diagnosis.layout import (
     STATIC_BAND_GRID,
     VARIANTS,
     _free_numerator_sse,
+    _profile_block,
     _profile_sums,
     _refit_denominator,
     _solve_lagged,
@@ -224,6 +225,21 @@ def test_profile_sums_against_the_host_path():
                 )
                 np.testing.assert_allclose(sse2, sse, rtol=1e-9)
                 np.testing.assert_allclose(coef2, coef, rtol=1e-8, atol=1e-10)
+
+
+def test_profile_sums_compile_once_whatever_the_length():
+    # the blocks carry the scan's state (`_profile_block`): records of two and
+    # of three blocks share one compiled program per variant and maps
+    rng = np.random.default_rng([19, 9])
+    S = np.linspace(0.1, 0.5, 5)
+    a = np.array([1.0, -0.9])
+    _profile_block.clear_cache()
+    for n in (600, 1300):
+        v = np.cumsum(rng.standard_normal(n)) * 0.1
+        _profile_sums(
+            v, v, S, S / 2, a, np.zeros(6), slide=True, mapped=(False,), depth=3
+        )
+    assert _profile_block._cache_size() == 1
 
 
 def test_the_profile_is_blind_to_the_nominal_numerator():

@@ -357,11 +357,12 @@ def stick_slip_profile(
     # one with memory goes through the valve positions on the host
     fused = nom.nl_kind in (NL_IDENTITY, NL_PIECEWISE)
 
-    def valves(S, J, slot):  # (G, n), G <= PROFILE_CHUNK padded to it: one shape
-        pad = PROFILE_CHUNK - S.shape[0]
-        S, J = np.pad(S, (0, pad), mode="edge"), np.pad(J, (0, pad), mode="edge")
-        x = _valve_positions(vp, S, J, slide=slot == "slide_jump")
-        return np.asarray(x)[: S.shape[0] - pad, :n]
+    def padded(x):  # G <= PROFILE_CHUNK grid points padded to it: one shape
+        return np.pad(x, (0, PROFILE_CHUNK - x.shape[0]), mode="edge")
+
+    def valves(S, J, slot):  # (G, n)
+        x = _valve_positions(vp, padded(S), padded(J), slide=slot == "slide_jump")
+        return np.asarray(x)[: S.shape[0], :n]
 
     def mapped_input(x):  # F(x) of each grid point's valve positions, (G, n)
         if nom.nl_kind == NL_IDENTITY:
@@ -380,12 +381,11 @@ def stick_slip_profile(
                 c = slice(i, i + PROFILE_CHUNK)
                 S, J = fs[c] + fd[c], fs[c] - fd[c]
                 if fused:  # both maps in one scan (`_profile_sums`)
-                    pad = PROFILE_CHUNK - S.shape[0]
                     gram, rhs, total = _profile_sums(
                         v,
                         y,
-                        np.pad(S, (0, pad), mode="edge"),
-                        np.pad(J, (0, pad), mode="edge"),
+                        padded(S),
+                        padded(J),
                         a,
                         nom.pl,
                         slide=slot == "slide_jump",
@@ -554,32 +554,35 @@ def _free_numerator_sse(
     b$) is the full product at lag $b - a$ less its last $a$ terms, so each lag
     difference costs one pass over the rows, and the SSE is $y^T y - \\theta^T
     (X^T y)$ at the solution."""
-    n = y.shape[0]
-    p = lags.shape[0]
-    q = p + int(level)
-    shifted = np.zeros((n, p))  # y_{k + l_j}: U^T y as one matrix product
+    return _solve_lagged(*_lagged_sums(u, y, lags), y, lags, level=level)
+
+
+def _lagged_sums(
+    u: np.ndarray, y: np.ndarray, lags: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """`_profile_sums`' sums on the host, from the rows of `u` (`(G, n)`), at the
+    entries of `lags` (the others 0): `(gram (G, D, D), rhs (G, D), total (G, D))`,
+    $D$ = `lags[-1] + 1`."""
+    n, G, D = y.shape[0], u.shape[0], int(lags[-1]) + 1
+    shifted = np.zeros((n, lags.shape[0]))  # y_{k + l_j}: U^T y as one product
     for j, lag in enumerate(lags):
         shifted[: n - lag, j] = y[lag:]
-    rhs = list((u @ shifted).T)
+    rhs, total = np.zeros((G, D)), np.zeros((G, D))
+    rhs[:, lags] = u @ shifted
     full = {
         int(d): np.einsum("gk,gk->g", u[:, d:], u[:, : n - d])
         for d in np.unique(lags[None, :] - lags[:, None])
         if d >= 0
     }
-    gram = np.empty((u.shape[0], q, q))
-    for i in range(p):
-        for j in range(i, p):
-            a, b = int(lags[i]), int(lags[j])
-            m = full[b - a]
+    gram = np.zeros((G, D, D))
+    for i, a in enumerate(lags):
+        for b in lags[i:]:
+            m = full[int(b - a)]
             if a > 0:  # the terms past the record's end for the later lag
                 m = m - np.einsum("gk,gk->g", u[:, n - a :], u[:, n - b : n - b + a])
-            gram[:, i, j] = gram[:, j, i] = m
-    if level:
-        for i, lag in enumerate(lags):
-            gram[:, i, p] = gram[:, p, i] = np.sum(u[:, : n - lag], axis=1)
-        gram[:, p, p] = n
-        rhs.append(np.full(u.shape[0], np.sum(y)))
-    return _solve_normal_equations(gram, np.stack(rhs, axis=1), y @ y)
+            gram[:, a, b] = gram[:, b, a] = m
+        total[:, a] = np.sum(u[:, : n - a], axis=1)
+    return gram, rhs, total
 
 
 def _solve_lagged(
@@ -591,9 +594,10 @@ def _solve_lagged(
     *,
     level: bool = False,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """`_free_numerator_sse` from `_profile_sums` over the lags $0 ..
-    D - 1$ (`(G, D, D)`, `(G, D)`, `(G, D)`) of the rows' filtered inputs: those
-    of `lags`, with the constant where `level`."""
+    """`_free_numerator_sse` from the sums over the lags $0 .. D - 1$ (`(G, D,
+    D)`, `(G, D)`, `(G, D)`) of the rows' filtered inputs (`_profile_sums`, or
+    `_lagged_sums` on the host): those of `lags`, with the constant where
+    `level`."""
     p = lags.shape[0]
     q = p + int(level)
     g = np.empty((gram.shape[0], q, q))

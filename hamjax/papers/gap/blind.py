@@ -691,14 +691,43 @@ def score(
     }
 
 
+# the bands of a loop's valve visibility (`control_loops.valve_visibility`) its
+# recall is split by: a reporting choice, no constant of the diagnosis
+VISIBILITY_BANDS = (1.0, 3.0)
+
+
+def visibility_band(v: float) -> str:
+    """`"<1"`, `"1-3"` or `">=3"` (`VISIBILITY_BANDS`)."""
+    lo, hi = VISIBILITY_BANDS
+    return f"<{lo:g}" if v < lo else (f"{lo:g}-{hi:g}" if v < hi else f">={hi:g}")
+
+
+def _ordered(field: str, counts: dict) -> dict:
+    """`counts` by value: the visibility bands from low to high, others sorted."""
+    if field != "valve_visibility":
+        return dict(sorted(counts.items()))
+    lo, hi = VISIBILITY_BANDS
+    order = [visibility_band(b) for b in (lo / 2, lo, hi)]
+    return {b: counts[b] for b in order if b in counts}
+
+
 def stiction_score(truth: dict, named: dict) -> dict:
     """The stiction question on a control-loop benchmark (truth `backlash` = a sticky
     valve), with one answer on both sides: "the valve sticks" is a name in
     STICTION_LIKE. Recall (stiction loops so named), false-alarm rate (loops without
     stiction so named), balanced accuracy (recall + 1 - false alarm) / 2, over the
     cases with a result; `recall_backlash` also counts the stiction loops named the
-    contract's class `backlash` itself (the stricter reading)."""
+    contract's class `backlash` itself (the stricter reading). `recall_by` splits
+    the recall by the truth's `process`, `disturbance` and `valve_visibility`
+    (where the truth has them; the visibility in `VISIBILITY_BANDS`):
+    `{field: {value: [named stiction-like, loops]}}`, the value `none` for a
+    loop without a disturbance."""
     hit, exact, n_st, alarm, n_free = 0, 0, 0, 0, 0
+    by: dict[str, dict[str, list[int]]] = {
+        "process": {},
+        "disturbance": {},
+        "valve_visibility": {},
+    }
     for name, tr in truth["cases"].items():
         if name not in named:
             continue
@@ -706,6 +735,14 @@ def stiction_score(truth: dict, named: dict) -> dict:
             n_st += 1
             hit += named[name] in STICTION_LIKE
             exact += named[name] == "backlash"
+            for field, counts in by.items():
+                if field in tr:
+                    value = tr[field]
+                    if field == "valve_visibility":
+                        value = visibility_band(value)
+                    c = counts.setdefault(str(value or "none"), [0, 0])
+                    c[0] += named[name] in STICTION_LIKE
+                    c[1] += 1
         else:
             n_free += 1
             alarm += named[name] in STICTION_LIKE
@@ -718,6 +755,7 @@ def stiction_score(truth: dict, named: dict) -> dict:
         "recall_backlash": exact / n_st if n_st else float("nan"),
         "false_alarm": false_alarm,
         "balanced_accuracy": (recall + 1 - false_alarm) / 2,
+        "recall_by": {f: _ordered(f, c) for f, c in by.items() if c},
     }
 
 
@@ -756,6 +794,13 @@ def format_score(s: dict) -> str:
             f"{', '.join(STICTION_LIKE)})  balanced accuracy "
             f"{st['balanced_accuracy']:.3f}"
         )
+        for field, counts in st.get("recall_by", {}).items():
+            lines.append(
+                f"stiction recall by {field}: "
+                + ", ".join(
+                    f"{k} {h / n:.3f} ({h}/{n})" for k, (h, n) in counts.items()
+                )
+            )
     if s["missing"]:
         lines.append(f"missing results: {len(s['missing'])}")
     return "\n".join(lines)

@@ -375,8 +375,22 @@ def _draw(rng, label: str, stiction: str | None) -> dict | None:
         "nominal_errors": {k: float(x) for k, x in errors.items()},
         "nominal_gap_over_noise": float(gap / sigma),
         "valve_gap_rms": float(min(_rms(lp["x"] - lp["op"]) for lp in loops.values())),
+        "valve_visibility": float(
+            min(valve_visibility(b, a, lp) for lp in loops.values())
+        ),
     }
     return {"model": model, **records, "truth": truth}
+
+
+def valve_visibility(b, a, loop: dict) -> float:
+    r"""What the valve adds to the PV over all else the process leaves: the RMS of
+    $B/A\,x - B/A\,\mathrm{OP}$ (the process driven by the valve position against
+    it driven by the command) over that of $\mathrm{PV} - B/A\,x$ (noise and
+    disturbance); 0 without stiction. Where it is well below 1 the valve is a
+    small part of what even the true process leaves on this record."""
+    rest = _rms(loop["pv"] - loop["w"])
+    added = _rms(loop["w"] - signal.lfilter(b, a, loop["op"]))
+    return added / rest if rest > 0 else math.inf
 
 
 def slots_for(seed: int, n_cases: int) -> list[tuple[str, str | None]]:

@@ -198,6 +198,9 @@ def test_cases_are_readable_loop_records(loops):
         if tr["effect"] == "parameter_mismatch":
             assert tr["nominal_gap_over_noise"] >= 0.3 - 1e-9
         assert (tr["valve_gap_rms"] > 0) == (tr["effect"] == "backlash")
+        # what the valve adds to the PV, over the noise and disturbance; 0 (to
+        # rounding of the filter) without a sticky valve
+        assert (tr["valve_visibility"] > 1e-9) == (tr["effect"] == "backlash")
 
 
 def test_none_loop_is_the_nominal_plus_white_noise(loops):
@@ -220,6 +223,32 @@ def test_none_loop_is_the_nominal_plus_white_noise(loops):
             assert abs(rho) < 0.15  # white: 4.7 x 1/sqrt(1000) covers the nominal
         checked += 1
     assert checked == 2
+
+
+def test_valve_visibility_from_the_published_records(loops):
+    # the truth's valve visibility rebuilt from what a user has: the written
+    # records (OP, PV), the truth's process (`discrete_process`) and its valve
+    # replayed on OP by the published model (`make_valve`): RMS(G x - G OP) /
+    # RMS(PV - G x), the smaller of the two records. The CSV's digits bound the
+    # agreement (1e-9 relative)
+    out, truth = loops
+    checked = 0
+    for name, tr in truth["cases"].items():
+        if tr["effect"] != "backlash":
+            continue
+        b, a = cl.discrete_process(
+            *cl.process_tf(tr["process"], tr["physics"]), tr["dt"], tr["delay_samples"]
+        )
+        case = read_case(out / "cases" / name)
+        found = []
+        for rec in (case.estimation, case.validation):
+            x = cl.valve_positions(cl.make_valve(tr["stiction"]), rec["v"])
+            w = signal.lfilter(b, a, x)
+            added = signal.lfilter(b, a, x) - signal.lfilter(b, a, rec["v"])
+            found.append(np.sqrt(np.mean(added**2) / np.mean((rec["y"] - w) ** 2)))
+        assert np.isclose(min(found), tr["valve_visibility"], rtol=1e-6), name
+        checked += 1
+    assert checked == 8
 
 
 def test_case_independent_of_the_count_and_deterministic(loops, tmp_path):
@@ -255,8 +284,29 @@ def test_stiction_scores():
         },
     }
     names = {f"c{i}": p for i, p in enumerate(named)}
+    kinds = ["fopdt", "integrating", "integrating", "sopdt"]
+    dists = [None, "drift", None, "coloured"]
+    vis = [0.5, 1.0, 2.9, 3.0]
+    for i, (kind, dist, v) in enumerate(zip(kinds, dists, vis, strict=True)):
+        truth["cases"][f"c{i}"] |= {
+            "process": kind,
+            "disturbance": dist,
+            "valve_visibility": v,
+        }
     s = score(truth, names)
     st = s["stiction"]
+    # by process: the integrating loops c1 (dead_zone) and c2 (none), 1 of 2;
+    # by disturbance: c0 and c2 have none (1 of 2), c1 drift, c3 coloured; by
+    # visibility: the band's lower edge belongs to it (1.0 and 3.0)
+    assert st["recall_by"] == {
+        "process": {"fopdt": [1, 1], "integrating": [1, 2], "sopdt": [1, 1]},
+        "disturbance": {"coloured": [1, 1], "drift": [1, 1], "none": [1, 2]},
+        "valve_visibility": {"<1": [1, 1], "1-3": [1, 2], ">=3": [1, 1]},
+    }
+    assert list(st["recall_by"]["valve_visibility"]) == ["<1", "1-3", ">=3"]
+    assert "stiction recall by process: fopdt 1.000 (1/1), integrating 0.500 (1/2)" in (
+        format_score(s)
+    )
     # recall: 3 of 4 stiction loops named stiction-like (backlash twice, dead_zone),
     # 2 of 4 named backlash itself; false alarm: friction and preload on 2 of the 4
     # loops without stiction

@@ -607,20 +607,12 @@ def _solve_lagged(
         g[:, :p, p] = g[:, p, :p] = total[:, lags]
         g[:, p, p] = y.shape[0]
         r.append(np.full((gram.shape[0], 1), np.sum(y)))
-    return _solve_normal_equations(g, np.concatenate(r, axis=1), y @ y)
-
-
-def _solve_normal_equations(
-    gram: np.ndarray, rhs: np.ndarray, yty: float
-) -> tuple[np.ndarray, np.ndarray]:
-    """`(sse (G,), coefficients (G, q))` of the least squares of normal equations
-    `gram` `(G, q, q)`, `rhs` `(G, q)` (a relative ridge of 1e-12 against a
-    singular `gram`): the SSE is $y^T y - \\theta^T (X^T y)$ at the solution."""
-    q = gram.shape[-1]
-    ridge = 1e-12 * np.maximum(np.trace(gram, axis1=1, axis2=2), 1e-300) / q
-    coef = np.linalg.solve(gram + ridge[:, None, None] * np.eye(q), rhs[..., None])
+    rhs = np.concatenate(r, axis=1)
+    # a relative ridge of 1e-12 against a singular gram
+    ridge = 1e-12 * np.maximum(np.trace(g, axis1=1, axis2=2), 1e-300) / q
+    coef = np.linalg.solve(g + ridge[:, None, None] * np.eye(q), rhs[..., None])
     coef = coef[..., 0]
-    return np.maximum(yty - np.einsum("gp,gp->g", coef, rhs), 0.0), coef
+    return np.maximum(y @ y - np.einsum("gp,gp->g", coef, rhs), 0.0), coef
 
 
 def looks_closed_loop(y: np.ndarray, v: np.ndarray) -> bool:
@@ -1147,8 +1139,7 @@ def n_free_parameters(plant: Hammerstein, *, fitted: bool = False) -> int:
     nl = {NL_PIECEWISE: 6, NL_TABULATED: 2, NL_BACKLASH: 2}.get(nom.nl_kind, 1)
     width = n_den + nl + MAX_EFFECT_SLOTS
     if fitted and not nom.is_ct:
-        n_lin = max(FITTED_ORDER, n_den, nom.b.shape[0] - 1)
-        width = max(width, 2 * n_lin + 1 + MAX_EFFECT_SLOTS)
+        width = max(width, 2 * refit_linear_order(nom) + 1 + MAX_EFFECT_SLOTS)
     return width
 
 

@@ -41,8 +41,9 @@ import jax.tree_util as jtu
 import numpy as np
 
 from .._filters import lfilter_numpy
+from .._results import RESULTS
 from ..models import DiscreteTransferFunction, Hammerstein, Identity, PiecewiseLinear
-from .augmented import slot_names
+from .augmented import Row, slot_names
 from .fit import LAMBDA0, fit_batch
 from .layout import (
     FITTED_ORDER,
@@ -60,6 +61,9 @@ ORDERS = tuple(range(1, FITTED_ORDER + 1))
 # loops and position axes (the whole block stays within the diagnosis's N_MAX)
 INTEGRATING_ORDERS = (1, 2)
 NOMINAL_STEPS = 100  # Levenberg-Marquardt budget of each nominal fit
+NOMINAL_FIRST_PASS = 30  # the steps of the first pass (`_fit_structures`)
+NOMINAL_BATCH = 32  # rows per batch of the nominal fits: one compiled shape
+SUCCESSFUL = int(RESULTS.successful._value)  # a converged fit's code on the host
 # highest order of `loop_response`'s ARX model (chosen by BIC below it; a cap on
 # the cost, with at most a twentieth of the record as its other bound)
 HIGH_ORDER = 20
@@ -217,20 +221,61 @@ N_PARAMS = N_MAX + 6 + MAX_EFFECT_SLOTS  # one row shape: one compilation
 
 def _fit_structures(jobs: list, length: int) -> list:
     """Output-error fits of `jobs`, `(dt, record, nl, b, a)` each (`nl` then
-    `B/A` started at `b, a` on `record`), all padded to `length` and fitted in one
-    batch (`fit.fit_batch`, split over the devices): `_read_structure`'s tuple
-    for each."""
+    `B/A` started at `b, a` on `record`), all padded to `length`: `_read_structure`'s
+    tuple for each.
+
+    The fits run in batches of `NOMINAL_BATCH` rows (`fit.fit_batch`, split over
+    the devices; one compiled shape per length): every row first gets
+    `NOMINAL_FIRST_PASS` steps, then the rows still moving resume exactly where
+    they stopped (`fit_batch`'s `resume`) with the rest of their
+    `NOMINAL_STEPS`, together. A batch costs as much as its slowest row, and about
+    half of the rows converge within the first pass: they no longer wait for the
+    others' whole budget (one batch of all rows before). A row's fit is the same
+    in either form, up to rounding (the 80 control loops of `hamjax blind make
+    --family loops --seed 1`, 2 cores: 55 s -> 41 s, every nominal within 2e-8
+    relative)."""
     prepared = [
         _prepare_structure(dt, record, nl, b, a, N_PARAMS, length)
         for dt, record, nl, b, a in jobs
     ]
-    pad = (-len(prepared)) % jax.local_device_count()  # whole rows per device
-    todo = prepared + [prepared[-1]] * pad
-    rows = jtu.tree_map(lambda *x: np.stack(x), *(row for _, row in todo))
-    arrays = jtu.tree_map(lambda *x: np.stack(x), *(prep.arrays for prep, _ in todo))
-    n = len(todo)
-    fit = fit_batch(rows, arrays, np.full(n, NOMINAL_STEPS), np.full(n, LAMBDA0))
-    params, sse = np.asarray(fit.params), np.asarray(fit.sse_est)
+    rows = jtu.tree_map(lambda *x: np.stack(x), *(row for _, row in prepared))
+    arrays = jtu.tree_map(lambda *x: np.stack(x), *(p.arrays for p, _ in prepared))
+    n = len(prepared)
+    theta, lam = np.array(rows.theta0), np.full(n, LAMBDA0)
+    params, sse, moving = None, np.empty(n), np.zeros(n, bool)
+    first = min(NOMINAL_FIRST_PASS, NOMINAL_STEPS)
+    todo, budget, resume = np.arange(n), first, False
+    while todo.shape[0]:
+        for i in range(0, todo.shape[0], NOMINAL_BATCH):
+            take = todo[i : i + NOMINAL_BATCH]
+            m = take.shape[0]
+            pad = np.r_[take, np.full(NOMINAL_BATCH - m, take[0])]  # at no budget
+            batch = Row(
+                idx=rows.idx[pad],
+                theta0=theta[pad],
+                tau=rows.tau[pad],
+                free=rows.free[pad],
+            )
+            fit = jax.device_get(
+                fit_batch(
+                    batch,
+                    jtu.tree_map(lambda x, pad=pad: x[pad], arrays),
+                    np.where(np.arange(NOMINAL_BATCH) < m, budget, 0),
+                    lam[pad],
+                    resume=np.full(NOMINAL_BATCH, resume),
+                )
+            )
+            if params is None:
+                params = np.empty((n, fit.params.shape[1]))
+            params[take], sse[take] = fit.params[:m], fit.sse_est[:m]
+            theta[take], lam[take] = fit.theta[:m], fit.lam[:m]
+            code = np.asarray(fit.result._value)[:m]
+            moving[take] = (code != SUCCESSFUL) & (np.asarray(fit.steps)[:m] >= budget)
+        if resume or first == NOMINAL_STEPS:
+            break
+        # the rows stopped at the first pass's budget: the rest of theirs, with
+        # the pending step re-evaluated (`fit_batch`'s `resume`)
+        todo, budget, resume = np.flatnonzero(moving), NOMINAL_STEPS - first + 1, True
     return [
         _read_structure(prep, params[j], sse[j], record, nl, b, a)
         for j, ((prep, _), (_, record, nl, b, a)) in enumerate(

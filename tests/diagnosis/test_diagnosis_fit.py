@@ -25,7 +25,7 @@ from hamjax.diagnosis.schedule import (
     run_batch,
     run_queue,
 )
-from hamjax.papers.gap.demo_cases import tiny_case
+from hamjax.papers.gap.demo_cases import coloured_case, tiny_case
 
 
 SETUP = textwrap.dedent(
@@ -154,6 +154,49 @@ def test_a_case_fits_the_same_alone_and_among_other_cases(monkeypatch):
     np.testing.assert_allclose(
         among[0]["theta"], alone[0]["theta"], rtol=1e-7, atol=1e-9
     )
+
+
+def test_the_queues_passes_leave_every_fit_as_one_pass_would(monkeypatch):
+    # After screening, every row runs in passes of at most FIRST_PASS steps per
+    # batch and, still moving, resumes exactly where it stopped (`fit_batch`'s
+    # `resume`): the finishing rows, their continuations and the prediction-error
+    # fits alike. With a 3-step pass (each of them split, several times) and with
+    # the whole 10-step budget in one pass, the rows and the prediction-error fits
+    # must agree to rounding of the other batch widths (1e-9 on the SSE, as the
+    # test above; a lost or repeated step moves an unconverged row by far more).
+    monkeypatch.setattr(schedule, "SCREEN_STEPS", 2)
+    monkeypatch.setattr(schedule, "FINISH_STEPS", 10)
+    preps = [
+        prepare(*coloured_case(jr.key(11)), length=512, n_params=13),
+        prepare(*tiny_case(jr.key(6), "backlash", noise=1e-3), length=512, n_params=13),
+    ]
+    run_batch, resumed = schedule.run_batch, {}
+
+    def spy(take, budgets, *args, **kwargs):  # the stages of the resumed items
+        for it in take:
+            resumed[it.stage] = resumed.get(it.stage, 0) + it.resume
+        return run_batch(take, budgets, *args, **kwargs)
+
+    monkeypatch.setattr(schedule, "run_batch", spy)
+    got = {}
+    for first in (3, 10):
+        monkeypatch.setattr(schedule, "FIRST_PASS", first)
+        fits = got[first] = {}
+        resumed.clear()
+        run_queue(preps, 8, lambda c, f, fits=fits: fits.setdefault(c, f))
+        # split: finishing rows and prediction-error fits resumed (a lost or
+        # repeated step would move them); whole: none of them
+        assert (resumed.get("whiten", 0) > 0) == (first == 3), resumed
+        assert (resumed.get("more", 0) > 0) == (first == 3), resumed
+    split, whole = got[3], got[10]
+    assert sorted(split) == [0, 1] and "whitened" in split[0]
+    for c in (0, 1):
+        pairs = [(split[c], whole[c])]
+        if "whitened" in whole[c]:
+            pairs.append((split[c]["whitened"], whole[c]["whitened"]))
+        for a, b in pairs:
+            np.testing.assert_allclose(a["sse_est"], b["sse_est"], rtol=1e-9)
+            np.testing.assert_allclose(a["theta"], b["theta"], rtol=1e-7, atol=1e-9)
 
 
 def test_a_rows_fit_does_not_see_a_diverging_batch_mate():

@@ -99,6 +99,18 @@ def test_an_integrating_plant_gets_an_integrating_nominal():
     assert _rms(y_fit - y) < 1e-6 * np.ptp(y)
 
 
+def _noisy_piecewise_record():
+    """`(dt, v, record)`: a staircase through a piecewise-linear map and a
+    second-order block, white noise of std 0.02 on the output."""
+    dt = 0.05
+    nl = hj.PiecewiseLinear(k1=1.5, k2=0.7, d1=0.2, d2=-0.3)
+    lin = hj.DiscreteTransferFunction([0.0, 0.2, 0.1], [1.0, -1.1, 0.4], dt)
+    v = staircase(jr.key(3), 600)
+    rec = _record(hj.Hammerstein(nl, lin), v, dt)
+    rec["y"] = rec["y"] + 0.02 * np.asarray(jr.normal(jr.key(4), v.shape))
+    return dt, v, rec
+
+
 @pytest.mark.slow
 def test_stable_candidates_are_scored_by_their_fit_sse(monkeypatch):
     # `fit_nominal` scores a stable candidate by the SSE its output-error fit
@@ -109,12 +121,7 @@ def test_stable_candidates_are_scored_by_their_fit_sse(monkeypatch):
     from hamjax.diagnosis import nominal_fit
     from hamjax.diagnosis.layout import bucket
 
-    dt = 0.05
-    nl = hj.PiecewiseLinear(k1=1.5, k2=0.7, d1=0.2, d2=-0.3)
-    lin = hj.DiscreteTransferFunction([0.0, 0.2, 0.1], [1.0, -1.1, 0.4], dt)
-    v = staircase(jr.key(3), 600)
-    rec = _record(hj.Hammerstein(nl, lin), v, dt)
-    rec["y"] = rec["y"] + 0.02 * np.asarray(jr.normal(jr.key(4), v.shape))
+    dt, v, rec = _noisy_piecewise_record()
     checked = 0
     starts = (hj.PiecewiseLinear(k1=1.0, k2=1.0), hj.Identity())
     jobs = [
@@ -145,6 +152,46 @@ def test_stable_candidates_are_scored_by_their_fit_sse(monkeypatch):
     assert type(again.nonlinearity) is type(chosen.nonlinearity)
     np.testing.assert_array_equal(np.asarray(again.linear.a), chosen.linear.a)
     np.testing.assert_array_equal(np.asarray(again.linear.b), chosen.linear.b)
+
+
+@pytest.mark.slow
+def test_nominal_fits_in_passes_are_the_fits_in_one(monkeypatch):
+    # The nominal's structures are fitted in batches of NOMINAL_BATCH rows, first
+    # for NOMINAL_FIRST_PASS steps, the rows still moving then resumed exactly
+    # (`fit_batch`'s `resume`) for the rest of NOMINAL_STEPS. Three structures in
+    # batches of two (one padded) with a 4-step first pass, against one pass of
+    # the whole budget: the same fits to rounding of the other batch widths (1e-9
+    # on the SSE; a lost or repeated step moves an unconverged fit by far more).
+    from hamjax.diagnosis import nominal_fit
+    from hamjax.diagnosis.layout import bucket
+
+    dt, v, rec = _noisy_piecewise_record()
+    jobs = [
+        (dt, rec, start, *nominal_fit._arx(v, rec["y"], n))
+        for n, start in ((1, hj.PiecewiseLinear(k1=1.0, k2=1.0)), (2, hj.Identity()))
+        + ((2, hj.PiecewiseLinear(k1=1.0, k2=1.0)),)
+    ]
+    monkeypatch.setattr(nominal_fit, "NOMINAL_BATCH", 2)
+    resumed = []  # the resumed passes' live rows
+    fit_batch = nominal_fit.fit_batch
+
+    def spy(rows, cases, steps, lam0, **kw):
+        resumed.append(int(np.sum(kw["resume"] & (np.asarray(steps) > 0))))
+        return fit_batch(rows, cases, steps, lam0, **kw)
+
+    monkeypatch.setattr(nominal_fit, "fit_batch", spy)
+    got = {}
+    for first in (4, nominal_fit.NOMINAL_STEPS):
+        monkeypatch.setattr(nominal_fit, "NOMINAL_FIRST_PASS", first)
+        resumed.clear()
+        got[first] = nominal_fit._fit_structures(jobs, bucket(v.shape[0]))
+        assert (sum(resumed) > 0) == (first < nominal_fit.NOMINAL_STEPS), resumed
+    for split, whole in zip(got[4], got[nominal_fit.NOMINAL_STEPS], strict=True):
+        assert type(split[0]) is type(whole[0])
+        np.testing.assert_allclose(split[1], whole[1], rtol=1e-7, atol=1e-12)
+        np.testing.assert_allclose(split[2], whole[2], rtol=1e-7, atol=1e-12)
+        if whole[4] is not None:
+            np.testing.assert_allclose(split[4], whole[4], rtol=1e-9)
 
 
 SEED_PI = 3  # a draw of `helpers.pi_loop` (the closed-loop tests' PI loop)

@@ -43,6 +43,7 @@ import numpy as np
 from .._filters import lfilter_numpy
 from .._results import RESULTS
 from ..models import DiscreteTransferFunction, Hammerstein, Identity, PiecewiseLinear
+from ..simulation.sharding import effective_chunk
 from .augmented import Row, slot_names
 from .fit import LAMBDA0, fit_batch
 from .layout import (
@@ -62,7 +63,9 @@ ORDERS = tuple(range(1, FITTED_ORDER + 1))
 INTEGRATING_ORDERS = (1, 2)
 NOMINAL_STEPS = 100  # Levenberg-Marquardt budget of each nominal fit
 NOMINAL_FIRST_PASS = 30  # the steps of the first pass (`_fit_structures`)
-NOMINAL_BATCH = 32  # rows per batch of the nominal fits: one compiled shape
+# rows per batch of the nominal fits (rounded up to a multiple of the devices:
+# each gets a slice): one compiled shape per length
+NOMINAL_BATCH = 32
 SUCCESSFUL = int(RESULTS.successful._value)  # a converged fit's code on the host
 # highest order of `loop_response`'s ARX model (chosen by BIC below it; a cap on
 # the cost, with at most a twentieth of the record as its other bound)
@@ -245,11 +248,12 @@ def _fit_structures(jobs: list, length: int) -> list:
     params, sse, moving = None, np.empty(n), np.zeros(n, bool)
     first = min(NOMINAL_FIRST_PASS, NOMINAL_STEPS)
     todo, budget, resume = np.arange(n), first, False
+    width = effective_chunk(NOMINAL_BATCH, jax.local_device_count())  # rows a batch
     while todo.shape[0]:
-        for i in range(0, todo.shape[0], NOMINAL_BATCH):
-            take = todo[i : i + NOMINAL_BATCH]
+        for i in range(0, todo.shape[0], width):
+            take = todo[i : i + width]
             m = take.shape[0]
-            pad = np.r_[take, np.full(NOMINAL_BATCH - m, take[0])]  # at no budget
+            pad = np.r_[take, np.full(width - m, take[0])]  # at no budget
             batch = Row(
                 idx=rows.idx[pad],
                 theta0=theta[pad],
@@ -260,9 +264,9 @@ def _fit_structures(jobs: list, length: int) -> list:
                 fit_batch(
                     batch,
                     jtu.tree_map(lambda x, pad=pad: x[pad], arrays),
-                    np.where(np.arange(NOMINAL_BATCH) < m, budget, 0),
+                    np.where(np.arange(width) < m, budget, 0),
                     lam[pad],
-                    resume=np.full(NOMINAL_BATCH, resume),
+                    resume=np.full(width, resume),
                 )
             )
             if params is None:

@@ -49,6 +49,7 @@ from .effects.time_delay import delay
 
 
 BLOCK = 256  # samples per block of `normal_equations`
+SUCCESSFUL = int(RESULTS.successful._value)  # a converged fit's code on the host
 
 
 class RowFit(eqx.Module):

@@ -41,11 +41,10 @@ import jax.tree_util as jtu
 import numpy as np
 
 from .._filters import lfilter_numpy
-from .._results import RESULTS
 from ..models import DiscreteTransferFunction, Hammerstein, Identity, PiecewiseLinear
 from ..simulation.sharding import effective_chunk
 from .augmented import Row, slot_names
-from .fit import LAMBDA0, fit_batch
+from .fit import LAMBDA0, SUCCESSFUL, fit_batch
 from .layout import (
     FITTED_ORDER,
     MAX_EFFECT_SLOTS,
@@ -66,7 +65,6 @@ NOMINAL_FIRST_PASS = 30  # the steps of the first pass (`_fit_structures`)
 # rows per batch of the nominal fits (rounded up to a multiple of the devices:
 # each gets a slice): one compiled shape per length
 NOMINAL_BATCH = 32
-SUCCESSFUL = int(RESULTS.successful._value)  # a converged fit's code on the host
 # highest order of `loop_response`'s ARX model (chosen by BIC below it; a cap on
 # the cost, with at most a twentieth of the record as its other bound)
 HIGH_ORDER = 20

@@ -35,7 +35,6 @@ import jax
 import jax.tree_util as jtu
 import numpy as np
 
-from .._results import RESULTS
 from ..simulation.sharding import effective_chunk
 from .attribute import (
     noise_candidates,
@@ -44,7 +43,7 @@ from .attribute import (
     whitening_predictor,
 )
 from .augmented import Row, uses_feedback, uses_memory, uses_table
-from .fit import LAMBDA0, RowFit, fit_batch, theta_std
+from .fit import LAMBDA0, SUCCESSFUL, RowFit, fit_batch, theta_std
 from .layout import (
     Prepared,
     best_row_per_class,
@@ -71,7 +70,6 @@ CONTINUE_CLASSES = 4
 # 2-4 cases ran in 59-72 s, 8 in 82 s, 16 in 91 s (same effects named in all).
 CASES_PER_BATCH = 4
 FIELDS = tuple(RowFit.__dataclass_fields__)
-SUCCESSFUL = int(RESULTS.successful._value)  # a converged fit's code on the host
 
 
 @dataclass
@@ -391,7 +389,7 @@ def run_batch(
             np.asarray(budgets + [0] * pad, dtype=np.int32),
             np.asarray([it.lam0 for it in items]),
             while_compiling,
-            resume=np.asarray([it.stage == "more" or it.resume for it in items]),
+            resume=np.asarray([it.resume for it in items]),
             **(flags or {}),
         )
     )

@@ -69,7 +69,7 @@ Decisions, in order:
   noise" its $d$ has mean $\\le 0$ whichever candidate is tried, so the level
   is that of the deterministic-gap step, Bonferroni over the same candidates);
   then the best structural candidate through $A$ against the re-fit through
-  $A$ ($z_{struct}$), else the re-fit. A coloured disturbance (a control
+  $A$ ($z_{struct}$, or *by likelihood* below), else the re-fit. A coloured disturbance (a control
   loop's load, a slow drift) inflates the batch-means se of the simulation
   comparison until no deterministic effect is significant; whitened, the same
   evidence is judged against the innovations alone, which is what a
@@ -123,6 +123,27 @@ Decisions, in order:
   estimation residual, which $D$ has made white: an imperfect $D$ was then judged
   without the filter that forecasts what it leaves on validation, and a
   structural effect closing 50-80 % of the gap lost to the noise model.)
+
+  *By likelihood, through the noise predictor.* Where that held-out test is not
+  significant, $D$ still keeps its name when the nested likelihood-ratio test
+  of its prediction-error fit over the re-fit's, both with $A$ fixed, is
+  significant on the estimation record and validation through $A$ confirms it
+  ($z > 2$): `_lr_through_noise`, which is `_nested_lr` on the sums of squared
+  one-step errors $\\sum (A r)^2$; the same second route serves the structural
+  step of the gap through the noise predictor above. This is the cascade's own
+  pair of tests (held-out $z$, or nested likelihood ratio confirmed on
+  validation) carried over to the noise model. *Derivation.* Under "no effect,
+  noise of class $M$" the one-step errors of the prediction-error fits are the
+  innovations, white, and $D$ nests the re-fit, so
+  $(S_{re-fit} - S_D) / \\hat\\sigma^2_\\varepsilon \\sim \\chi^2_k$ as in
+  `_nested_lr`, with its threshold at $\\alpha / m$ for the $m$ structural
+  classes (the white-noise likelihood ratio of the cascade has no such
+  distribution under a coloured disturbance, which inflates it: that is why it
+  names a structure there only to be re-judged here). The held-out test sees
+  the validation record alone, and through $A$ only what the predictor cannot
+  forecast; the estimation record doubles that evidence. No constant was
+  added: $\\alpha$ = `LR_ALPHA` and the confirmation level `Z_CONFIRM` are the
+  cascade's.
 
   *Prediction-error fits* (issue 18, item 1). Both tests through $A$ (the gap
   through the noise predictor and the veto) judge a deterministic candidate
@@ -390,7 +411,13 @@ def _params(prep: Prepared, fit: dict, row: int, effect: str) -> dict:
 
 
 def _nested_lr(
-    prep: Prepared, sse: np.ndarray, pm: Candidate, best: Candidate, m: int
+    prep: Prepared,
+    sse: np.ndarray,
+    pm: Candidate,
+    best: Candidate,
+    m: int,
+    *,
+    z: float | None = None,
 ) -> dict:
     """The likelihood-ratio test on estimation data of the structural candidate
     that validation chose (`best`, lowest validation MSE) against the re-fit it
@@ -405,7 +432,12 @@ def _nested_lr(
     the numerator as well) gets its own $\\chi^2_k$ quantile at $\\alpha / m$.
     Because the test trusts the noise to be white and the re-fit to be at its
     optimum, the candidate must also improve on the re-fit on validation with
-    $z > 2$."""
+    $z > 2$.
+
+    Through a noise predictor (`_lr_through_noise`) `sse` holds the
+    prediction-error fits' sums of squared one-step errors $A(q) r$ (the
+    innovations, white under the noise model: the same $\\chi^2_k$) and `z` the
+    validation $z$ of the two seen through $A$."""
     p = n_fitted(prep, best.row)
     s2 = sse[best.row] / max(prep.n_est - p, 1)
     lr = float((sse[pm.row] - sse[best.row]) / s2) if s2 > 0 else 0.0
@@ -415,7 +447,8 @@ def _nested_lr(
         from scipy.stats import chi2
 
         threshold = max(threshold, float(chi2.isf(LR_ALPHA / m, k)))
-    z = improvement_z(pm.residual, best.residual)
+    if z is None:
+        z = improvement_z(pm.residual, best.residual)
     return {
         "lr": lr if np.isfinite(lr) else 0.0,
         "threshold": float(threshold),
@@ -423,6 +456,20 @@ def _nested_lr(
         "best": best.effect,
         "significant": bool(np.isfinite(lr) and lr > threshold and z > Z_CONFIRM),
     }
+
+
+def _lr_through_noise(
+    prep: Prepared, fit: dict, pm: Candidate, best: Candidate, m: int, z: float
+) -> dict | None:
+    """`_nested_lr` of the structural candidate `best` over the re-fit `pm`, both
+    fitted by prediction error with the noise model fixed (`fit["whitened"]`,
+    `schedule.whitening_items`), on their estimation sums of squared one-step
+    errors, confirmed by `z` (the two validation residuals through the same
+    predictor). None where either row was not fitted so."""
+    white = fit.get("whitened")
+    if white is None or not {pm.row, best.row} <= set(white.get("rows", ())):
+        return None
+    return _nested_lr(prep, finite_sse(white), pm, best, m, z=z)
 
 
 def _predicted(noise_c: Candidate, r: np.ndarray) -> np.ndarray | None:
@@ -459,16 +506,25 @@ def _over_noise(noise_c: Candidate, r_val: np.ndarray, sig) -> dict:
 
 
 def _gap_through_noise(
-    noise_c: Candidate, cands: dict, det: list, sig, tests: dict
+    noise_c: Candidate,
+    cands: dict,
+    det: list,
+    sig,
+    tests: dict,
+    *,
+    lr=lambda pm, best, m, z: None,
 ) -> Candidate | None:
     """The deterministic gap judged with the noise model on top (module
     docstring, *The gap through the noise predictor*): every deterministic
     candidate's validation residual through `noise_c`'s one-step predictor; the
     best against the reference with it (`noise_c`, `_over_noise`, $z^\\star$),
     then the best structural one against the re-fit, both through the same
-    filter ($z_{struct}$). Where the re-fit is the reference `det` leaves it
-    out, and the last comparison repeats the first at a lower level. Returns
-    the candidate named, or None (the noise model)."""
+    filter ($z_{struct}$), or by the nested likelihood ratio of their
+    prediction-error fits confirmed there (`lr`: `_lr_through_noise`, as the
+    cascade without the noise model takes `_nested_lr`). Where the re-fit is
+    the reference `det` leaves it out, and the last comparison repeats the
+    first at a lower level. Returns the candidate named, or None (the noise
+    model)."""
 
     def white(c: Candidate) -> np.ndarray:
         err = _predicted(noise_c, c.residual)
@@ -495,6 +551,11 @@ def _gap_through_noise(
     }
     if s_sig:
         return best_s
+    lr_test = lr(pm, best_s, len(structural), z_s)
+    if lr_test is not None:
+        tests["structural_lr_through_noise"] = lr_test
+        if lr_test["significant"]:
+            return best_s
     return (
         pm
         if best is pm or _over_noise(noise_c, pm.residual, sig)["significant"]
@@ -691,6 +752,11 @@ def attribute(prep: Prepared, fit: dict) -> Attribution:
         )
 
     det = [cands[e] for e in DETERMINISTIC_NAMES if e in cands]
+    n_structural = sum(c.effect != "parameter_mismatch" for c in det)
+
+    def lr_pe(pm: Candidate, best: Candidate, m: int, z: float) -> dict | None:
+        return _lr_through_noise(prep, fit, pm, best, m, z)
+
     best_det = min(det, key=lambda c: c.gap_after)
     floor_best = min(noise_floor_hf(best_det.residual), best_det.gap_after)
     tests = {
@@ -753,7 +819,7 @@ def attribute(prep: Prepared, fit: dict) -> Attribution:
                     if not (refit_ref and c.effect == "parameter_mismatch")
                 ]
                 named = _gap_through_noise(
-                    through(noise_c), cands_pe, det_pe, sig, tests
+                    through(noise_c), cands_pe, det_pe, sig, tests, lr=lr_pe
                 )
                 if named is not None and not (
                     prep.fitted and named.effect == "parameter_mismatch"
@@ -777,6 +843,19 @@ def attribute(prep: Prepared, fit: dict) -> Attribution:
         if n_sig and noise_c.gap_after < gap_after:
             test = _over_noise(through(noise_c), cands_pe[chosen.effect].residual, sig)
             tests["deterministic_over_noise"] = test
+            if not test["significant"] and chosen.effect != "parameter_mismatch":
+                # or by likelihood: over the re-fit, both by prediction error
+                pm, d = cands_pe["parameter_mismatch"], cands_pe[chosen.effect]
+                e_pm, e_d = (
+                    _predicted(noise_c, pm.residual),
+                    _predicted(noise_c, d.residual),
+                )
+                if e_pm is not None and e_d is not None:
+                    z = improvement_z(e_pm, e_d)
+                    lr_test = lr_pe(pm, d, n_structural, z)
+                    if lr_test is not None:
+                        test["lr"] = lr_test
+                        test["significant"] = lr_test["significant"]
             if not test["significant"]:
                 effect, chosen = noise_c.effect, noise_c
                 gap_after = floor = chosen.gap_after

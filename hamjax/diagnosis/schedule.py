@@ -316,6 +316,9 @@ def run_queue(
             extra = whitening_items(c, preps[c], fits[c])
             if extra:
                 fits[c]["whitened"] = {k: np.copy(fits[c][k]) for k in FIELDS}
+                # the rows fitted by prediction error (the others keep their
+                # output-error fits: `attribute` tests only these by likelihood)
+                fits[c]["whitened"]["rows"] = sorted({it.row for it in extra})
             queues["whiten"].extend(extra)
             outstanding[c] = len(extra)
         if outstanding[c] == 0:

@@ -465,9 +465,12 @@ def _lr_through_noise(
     fitted by prediction error with the noise model fixed (`fit["whitened"]`,
     `schedule.whitening_items`), on their estimation sums of squared one-step
     errors, confirmed by `z` (the two validation residuals through the same
-    predictor). None where either row was not fitted so."""
+    predictor). None where either row was not fitted so, or where `best` frees
+    no more parameters than `pm` (no nested test)."""
     white = fit.get("whitened")
     if white is None or not {pm.row, best.row} <= set(white.get("rows", ())):
+        return None
+    if n_fitted(prep, best.row) <= n_fitted(prep, pm.row):  # not nested
         return None
     return _nested_lr(prep, finite_sse(white), pm, best, m, z=z)
 

@@ -3,6 +3,8 @@ through the noise predictor*): under a strongly coloured disturbance the plain
 simulation comparison has no power, the whitened one keeps its level. Residuals are
 built directly (no fit), so the statistic itself is tested: fixed keys."""
 
+from types import SimpleNamespace
+
 import jax.random as jr
 import numpy as np
 import scipy.signal
@@ -12,6 +14,7 @@ from hamjax.diagnosis.attribute import (
     Z_STAR,
     Candidate,
     _gap_through_noise,
+    _lr_through_noise,
     rms,
     significant,
 )
@@ -93,3 +96,80 @@ def test_no_effect_keeps_the_stated_level():
         effect, _ = _decide(residuals, n)
         count += effect is not None
     assert count <= 6, count
+
+
+def _nested_prep(n: int, p_refit: int, p_effect: int):
+    """A stand-in for `layout.Prepared` with what the nested test reads: row 0
+    the re-fit (`p_refit` fitted slots), row 1 the effect's (`p_effect`)."""
+    slots = max(p_refit, p_effect)
+    pad = slots + 1  # an index past the slots: padding, not fitted
+
+    def row(p):
+        return SimpleNamespace(idx=np.r_[np.arange(p), np.full(slots - p, pad)])
+
+    rows = [("parameter_mismatch", row(p_refit)), ("backlash", row(p_effect))]
+    return SimpleNamespace(
+        rows=rows, arrays=SimpleNamespace(anchor=np.zeros(slots)), n_est=n
+    )
+
+
+def _candidates():
+    empty = np.zeros(1)
+    return (
+        Candidate("parameter_mismatch", 0, 0.0, empty, None),
+        Candidate("backlash", 1, 0.0, empty, None),
+    )
+
+
+def test_the_likelihood_ratio_through_the_noise_model_is_chi2_under_no_effect():
+    # Regression stand-ins for the two prediction-error fits: y = X b + AR(1)
+    # noise, the re-fit on X (3 columns), the "effect" on X plus one regressor
+    # that is absent; both fitted with the noise filter A fixed (least squares
+    # on A-filtered data, which is what a prediction-error fit with A held
+    # does). Their one-step-error SSEs go through `_lr_through_noise`: its
+    # statistic must then be chi^2_1 (KS test over 400 fixed keys, rejected
+    # below p = 1e-3: a false failure once in a thousand). The same sums
+    # without the filter (an output-error fit's) give a ratio several times
+    # larger: what makes the plain likelihood ratio unusable under a coloured
+    # disturbance.
+    n, pole = 500, POLE
+    prep = _nested_prep(n, 3, 4)
+    pm, best = _candidates()
+    fit_of = lambda s_pm, s_d: {  # noqa: E731
+        "whitened": {"sse_est": np.array([s_pm, s_d]), "rows": [0, 1]}
+    }
+    white, plain = [], []
+    for k in range(400):
+        key = jr.key(5000 + k)
+        x = np.array(jr.normal(key, (n, 4)))
+        x[:, 3] = scipy.signal.lfilter([1.0], [1.0, -0.9], x[:, 3])  # slow
+        y = x[:, :3] @ np.array([1.0, -0.5, 0.3]) + _ar1(jr.fold_in(key, 1), n)
+        filt = lambda z: scipy.signal.lfilter([1.0, -pole], [1.0], z, axis=0)  # noqa: E731
+        for out, f in ((white, filt), (plain, lambda z: z)):
+            fy, fx = f(y), f(x)
+            s = [
+                np.sum((fy - fx[:, :m] @ np.linalg.lstsq(fx[:, :m], fy)[0]) ** 2)
+                for m in (3, 4)
+            ]
+            test = _lr_through_noise(prep, fit_of(*s), pm, best, 1, z=3.0)
+            out.append(test["lr"])
+    assert scipy.stats.kstest(white, scipy.stats.chi2(1).cdf).pvalue > 1e-3
+    assert np.median(plain) > 3 * scipy.stats.chi2(1).median(), np.median(plain)
+
+
+def test_the_likelihood_ratio_through_the_noise_model_needs_nested_whitened_fits():
+    pm, best = _candidates()
+    fit = {"whitened": {"sse_est": np.array([10.0, 5.0]), "rows": [0, 1]}}
+    # nested, both fitted by prediction error: a test (significant: far over
+    # the chi^2 threshold, validation z over Z_CONFIRM)
+    test = _lr_through_noise(_nested_prep(100, 3, 4), fit, pm, best, 4, z=3.0)
+    assert test is not None and test["significant"], test
+    assert not _lr_through_noise(_nested_prep(100, 3, 4), fit, pm, best, 4, z=1.0)[
+        "significant"
+    ]
+    # the effect's row kept its output-error fit: no test
+    half = {"whitened": {"sse_est": fit["whitened"]["sse_est"], "rows": [0]}}
+    assert _lr_through_noise(_nested_prep(100, 3, 4), half, pm, best, 4, z=3.0) is None
+    assert _lr_through_noise(_nested_prep(100, 3, 4), {}, pm, best, 4, z=3.0) is None
+    # as many parameters as the re-fit: not nested, no test
+    assert _lr_through_noise(_nested_prep(100, 4, 4), fit, pm, best, 4, z=3.0) is None

@@ -14,25 +14,16 @@ Prints one line per case and the largest relative difference of the two.
 """
 
 import argparse
-import statistics
 import time
 
 import jax
 import jax.numpy as jnp
 import jax.scipy.linalg as jsl
 import numpy as np
+from _timing import median_time
 
 import hamjax
 from hamjax._filters import expm_taylor as taylor_expm
-
-
-def _median_time(f, repeats: int) -> float:
-    walls = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        jax.block_until_ready(f())
-        walls.append(time.perf_counter() - start)
-    return statistics.median(walls)
 
 
 def main(argv=None) -> None:
@@ -51,8 +42,8 @@ def main(argv=None) -> None:
         start = time.perf_counter()
         compiled = batched.lower(M, dM).compile()
         compile_s = time.perf_counter() - start
-        run_s = _median_time(lambda c=compiled: c(M, dM), args.repeats)
-        eager_s = _median_time(lambda fn=fn: fn(small), args.repeats)
+        run_s = median_time(lambda c=compiled: c(M, dM), args.repeats)
+        eager_s = median_time(lambda fn=fn: fn(small), args.repeats)
         print(
             f"{name:10s} vmap-jvp batch {args.batch}: compile {compile_s:.3f} s, "
             f"run {run_s * 1e3:.3f} ms; eager 3x3: {eager_s * 1e3:.3f} ms"

@@ -27,22 +27,12 @@ import argparse
 import json
 import os
 import platform
-import statistics
-import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
+from _timing import median_time
 from scipy.signal import lfilter
-
-
-def _median_time(f, repeats: int) -> float:
-    walls = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        f()
-        walls.append(time.perf_counter() - start)
-    return statistics.median(walls)
 
 
 def main(argv=None) -> None:
@@ -96,9 +86,9 @@ def main(argv=None) -> None:
     )
     result = {"samples": n, "grid_points_per_chunk": PROFILE_CHUNK}
     for name, f in (("scan", scan), ("host_passes", host)):
-        one = _median_time(lambda f=f: f(chunks[0]), args.repeats)
+        one = median_time(lambda f=f: f(chunks[0]), args.repeats)
         with ThreadPoolExecutor(args.threads) as pool:
-            many = _median_time(
+            many = median_time(
                 lambda f=f: list(pool.map(f, chunks)), args.repeats
             ) / len(chunks)
         result[name] = {"s_per_chunk_1_thread": one, "s_per_chunk_threads": many}

@@ -380,6 +380,38 @@ def clear_compiled() -> None:
     PROGRAMS.clear()
 
 
+def fit_padded(
+    rows: Row,
+    cases: CaseArrays,
+    budgets: Int[np.ndarray, " M"],
+    lam0: Float[np.ndarray, " M"],
+    width: int,
+    while_compiling: Callable[[], None] | None = None,
+    *,
+    resume: Bool[np.ndarray, " M"] | None = None,
+    **flags: bool | None,
+) -> RowFit:
+    """`fit_batch` of `M <= width` rows (row `i` on case `i`, as gathered by the
+    caller) padded to `width` with copies of the first at a zero budget (one
+    compiled shape per width, whatever `M`); the first `M` fits, on the host.
+    `flags`: `fit_batch`'s `memory`, `table`, `feedback`, `whiten`."""
+    m = int(np.shape(budgets)[0])
+    if not 0 < m <= width:
+        raise ValueError(f"{m} rows for a batch of {width}")
+    pad = np.r_[np.arange(m), np.zeros(width - m, int)]
+    resume = np.zeros(m, bool) if resume is None else np.asarray(resume, bool)
+    fit = fit_batch(
+        jax.tree.map(lambda x: np.asarray(x)[pad], rows),
+        jax.tree.map(lambda x: np.asarray(x)[pad], cases),
+        np.where(np.arange(width) < m, np.asarray(budgets)[pad], 0),
+        np.asarray(lam0, float)[pad],
+        while_compiling,
+        resume=resume[pad],
+        **flags,
+    )
+    return jax.tree.map(lambda x: np.asarray(x)[:m], jax.device_get(fit))
+
+
 def fit_batch(
     rows: Row,
     cases: CaseArrays,

@@ -44,7 +44,7 @@ from .._filters import lfilter_numpy
 from ..models import DiscreteTransferFunction, Hammerstein, Identity, PiecewiseLinear
 from ..simulation.sharding import effective_chunk
 from .augmented import Row, slot_names
-from .fit import LAMBDA0, SUCCESSFUL, fit_batch
+from .fit import LAMBDA0, SUCCESSFUL, fit_padded
 from .layout import (
     FITTED_ORDER,
     MAX_EFFECT_SLOTS,
@@ -225,7 +225,7 @@ def _fit_structures(jobs: list, length: int) -> list:
     `B/A` started at `b, a` on `record`), all padded to `length`: `_read_structure`'s
     tuple for each.
 
-    The fits run in batches of `NOMINAL_BATCH` rows (`fit.fit_batch`, split over
+    The fits run in batches of `NOMINAL_BATCH` rows (`fit.fit_padded`, split over
     the devices; one compiled shape per length): every row first gets
     `NOMINAL_FIRST_PASS` steps, then the rows still moving resume exactly where
     they stopped (`fit_batch`'s `resume`) with the rest of their
@@ -251,28 +251,26 @@ def _fit_structures(jobs: list, length: int) -> list:
         for i in range(0, todo.shape[0], width):
             take = todo[i : i + width]
             m = take.shape[0]
-            pad = np.r_[take, np.full(width - m, take[0])]  # at no budget
             batch = Row(
-                idx=rows.idx[pad],
-                theta0=theta[pad],
-                tau=rows.tau[pad],
-                free=rows.free[pad],
+                idx=rows.idx[take],
+                theta0=theta[take],
+                tau=rows.tau[take],
+                free=rows.free[take],
             )
-            fit = jax.device_get(
-                fit_batch(
-                    batch,
-                    jtu.tree_map(lambda x, pad=pad: x[pad], arrays),
-                    np.where(np.arange(width) < m, budget, 0),
-                    lam[pad],
-                    resume=np.full(width, resume),
-                )
+            fit = fit_padded(  # padded to `width` rows: one shape per length
+                batch,
+                jtu.tree_map(lambda x, take=take: x[take], arrays),
+                np.full(m, budget),
+                lam[take],
+                width,
+                resume=np.full(m, resume),
             )
             if params is None:
                 params = np.empty((n, fit.params.shape[1]))
-            params[take], sse[take] = fit.params[:m], fit.sse_est[:m]
-            theta[take], lam[take] = fit.theta[:m], fit.lam[:m]
-            code = np.asarray(fit.result._value)[:m]
-            moving[take] = (code != SUCCESSFUL) & (np.asarray(fit.steps)[:m] >= budget)
+            params[take], sse[take] = fit.params, fit.sse_est
+            theta[take], lam[take] = fit.theta, fit.lam
+            code = np.asarray(fit.result._value)
+            moving[take] = (code != SUCCESSFUL) & (np.asarray(fit.steps) >= budget)
         if resume or first == NOMINAL_STEPS:
             break
         # the rows stopped at the first pass's budget: the rest of theirs, with

@@ -43,7 +43,7 @@ from .attribute import (
     whitening_predictor,
 )
 from .augmented import Row, uses_feedback, uses_memory, uses_table
-from .fit import LAMBDA0, SUCCESSFUL, RowFit, fit_batch, theta_std
+from .fit import LAMBDA0, SUCCESSFUL, RowFit, fit_padded, theta_std
 from .layout import (
     Prepared,
     best_row_per_class,
@@ -358,22 +358,21 @@ def run_batch(
     while_compiling: Callable[[], None] | None = None,
     flags: dict | None = None,
 ) -> dict:
-    """One batch: the items' rows and cases gathered on the host, padded to `batch`
-    with copies of the first item at a zero budget. `while_compiling`, `flags`
-    (`memory`, `table`, `feedback`): as in `fit.fit_batch`."""
-    pad = batch - len(take)
-    items = take + [take[0]] * pad
+    """One batch: the items' rows and cases gathered on the host and fitted in
+    a batch of `batch` (`fit.fit_padded`: padded with copies of the first item
+    at a zero budget). `while_compiling`, `flags` (`memory`, `table`,
+    `feedback`): as in `fit.fit_batch`."""
     pick = lambda name: np.stack(  # noqa: E731
-        [np.asarray(getattr(rows[it.case], name))[it.row] for it in items]
+        [np.asarray(getattr(rows[it.case], name))[it.row] for it in take]
     )
     row = Row(
         idx=pick("idx"),
-        theta0=np.stack([it.theta0 for it in items]),
+        theta0=np.stack([it.theta0 for it in take]),
         tau=pick("tau"),
         free=pick("free"),
     )
-    cases = jtu.tree_map(lambda x: x[np.asarray([it.case for it in items])], arrays)
-    noisy = [(j, it.noise) for j, it in enumerate(items) if it.noise is not None]
+    cases = jtu.tree_map(lambda x: x[np.asarray([it.case for it in take])], arrays)
+    noisy = [(j, it.noise) for j, it in enumerate(take) if it.noise is not None]
     if noisy:  # the prediction-error fits' noise filters and prior weights
         fir, ar, weight = (
             np.copy(x) for x in (cases.noise_fir, cases.noise_ar, cases.prior_weight)
@@ -385,16 +384,15 @@ def run_batch(
             cases,
             (fir, ar, weight),
         )
-    fit = jax.device_get(
-        fit_batch(
-            row,
-            cases,
-            np.asarray(budgets + [0] * pad, dtype=np.int32),
-            np.asarray([it.lam0 for it in items]),
-            while_compiling,
-            resume=np.asarray([it.resume for it in items]),
-            **(flags or {}),
-        )
+    fit = fit_padded(
+        row,
+        cases,
+        np.asarray(budgets, dtype=np.int32),
+        np.asarray([it.lam0 for it in take]),
+        batch,
+        while_compiling,
+        resume=np.asarray([it.resume for it in take]),
+        **(flags or {}),
     )
     return host_fields(fit)
 

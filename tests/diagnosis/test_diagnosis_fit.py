@@ -126,6 +126,27 @@ def test_resumed_fit_is_the_uninterrupted_fit():
         )
 
 
+def test_a_padded_batch_is_its_rows_fitted_alone():
+    # `fit_padded` fills a batch of `width` rows with copies of the first at no
+    # budget: the first m fits are those of the m rows in a batch of their own
+    # (to rounding: the batch width changes only the order of arithmetic); the
+    # padding returns nothing, and a batch wider than `width` is refused.
+    from hamjax.diagnosis.fit import fit_padded
+
+    prep = prepare(*tiny_case(jr.key(3), "extra_pole", noise=1e-3))
+    m = min(3, len(prep.rows))
+    rows = _stack([r for _, r in prep.rows[:m]])
+    cases = _stack([prep.arrays] * m)
+    alone = fit_batch(rows, cases, np.full(m, 8), np.full(m, LAMBDA0))
+    padded = fit_padded(rows, cases, np.full(m, 8), np.full(m, LAMBDA0), m + 3)
+    assert np.shape(padded.sse_est) == (m,)
+    np.testing.assert_allclose(padded.sse_est, alone.sse_est, rtol=1e-9)
+    np.testing.assert_allclose(padded.theta, alone.theta, rtol=1e-7, atol=1e-10)
+    np.testing.assert_array_equal(padded.steps, alone.steps)
+    with pytest.raises(ValueError, match="rows for a batch of"):
+        fit_padded(rows, cases, np.full(m, 8), np.full(m, LAMBDA0), m - 1)
+
+
 @pytest.mark.slow
 def test_a_case_fits_the_same_alone_and_among_other_cases(monkeypatch):
     # The queue's first pass (FIRST_PASS steps) and continuation split a finishing

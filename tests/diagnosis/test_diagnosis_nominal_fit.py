@@ -158,7 +158,7 @@ def test_stable_candidates_are_scored_by_their_fit_sse(monkeypatch):
 def test_nominal_fits_in_passes_are_the_fits_in_one(monkeypatch):
     # The nominal's structures are fitted in batches of NOMINAL_BATCH rows, first
     # for NOMINAL_FIRST_PASS steps, the rows still moving then resumed exactly
-    # (`fit_batch`'s `resume`) for the rest of NOMINAL_STEPS. Three structures in
+    # (`fit_batch`'s `resume`, through `fit_padded`) for the rest of NOMINAL_STEPS. Three structures in
     # batches of two (one padded) with a 4-step first pass, against one pass of
     # the whole budget: the same fits to rounding of the other batch widths (1e-9
     # on the SSE; a lost or repeated step moves an unconverged fit by far more).
@@ -173,13 +173,14 @@ def test_nominal_fits_in_passes_are_the_fits_in_one(monkeypatch):
     ]
     monkeypatch.setattr(nominal_fit, "NOMINAL_BATCH", 2)
     resumed = []  # the resumed passes' live rows
-    fit_batch = nominal_fit.fit_batch
+    fit_padded = nominal_fit.fit_padded
 
-    def spy(rows, cases, steps, lam0, **kw):
+    def spy(rows, cases, steps, lam0, width, **kw):
+        assert width == 2 and np.shape(steps)[0] <= width
         resumed.append(int(np.sum(kw["resume"] & (np.asarray(steps) > 0))))
-        return fit_batch(rows, cases, steps, lam0, **kw)
+        return fit_padded(rows, cases, steps, lam0, width, **kw)
 
-    monkeypatch.setattr(nominal_fit, "fit_batch", spy)
+    monkeypatch.setattr(nominal_fit, "fit_padded", spy)
     got = {}
     for first in (4, nominal_fit.NOMINAL_STEPS):
         monkeypatch.setattr(nominal_fit, "NOMINAL_FIRST_PASS", first)

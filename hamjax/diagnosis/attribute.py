@@ -69,9 +69,10 @@ Decisions, in order:
   noise" its $d$ has mean $\\le 0$ whichever candidate is tried, so the level
   is that of the deterministic-gap step, Bonferroni over the same candidates);
   then the best structural candidate through $A$ against the re-fit through
-  $A$ ($z_{struct}$, or *by likelihood* below), else the re-fit. A coloured disturbance (a control
-  loop's load, a slow drift) inflates the batch-means se of the simulation
-  comparison until no deterministic effect is significant; whitened, the same
+  $A$ ($z_{struct}$, or *by likelihood* below), else the re-fit. A coloured
+  disturbance (a control loop's load, a slow drift) inflates the batch-means se
+  of the simulation comparison until no deterministic effect is significant;
+  whitened, the same
   evidence is judged against the innovations alone, which is what a
   prediction-error comparison does (issue 19: never name a noise model merely
   because the disturbance is coloured). Measured (2026-12-03; fits cached and
@@ -858,7 +859,9 @@ def attribute(prep: Prepared, fit: dict) -> Attribution:
                     lr_test = lr_pe(pm, d, n_structural, z)
                     if lr_test is not None:
                         test["lr"] = lr_test
-                        test["significant"] = lr_test["significant"]
+                        if lr_test["significant"]:  # the verdict, and why
+                            test["significant"] = True
+                            test["by"] = "likelihood_ratio"
             if not test["significant"]:
                 effect, chosen = noise_c.effect, noise_c
                 gap_after = floor = chosen.gap_after

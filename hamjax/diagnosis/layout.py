@@ -201,15 +201,16 @@ def _profile_block(
     slide: bool,
     mapped: tuple[bool, ...],
 ) -> tuple:
-    """`_profile_sums`' scan over one block of time steps from `carry` (the
+    r"""`_profile_sums`' scan over one block of time steps from `carry` (the
     valve's carry, the filter's state `(na, M, G)`, the lagged inputs `(D, M,
-    G)` and the three sums `(D, D, M, G)`, `(D, M, G)`, `(D, M, G)`); the carry
-    after it."""
+    G)`, the sums $\sum u_k u_{k-j}$ `(D, M, G)`, $\sum y_k u_{k-j}$ `(D, M,
+    G)` and $\sum u_k$ `(M, G)`, and the lagged inputs at the last unmasked
+    step `(D, M, G)`); the carry after it."""
     step = _valve_step(slide, width, jump)
     zeros = jnp.zeros((len(mapped),) + width.shape)
 
     def body(carry, inputs):
-        valve, z, w, gram, rhs, total = carry
+        valve, z, w, lagged, rhs, total, last = carry
         vk, yk, mk = inputs
         valve = step(valve, vk)
         x = valve[1]
@@ -219,10 +220,38 @@ def _profile_block(
         out = u + z[0]  # direct form II transposed, b = [1]
         z = jnp.concatenate([z[1:], zeros[None]]) - a[1:, None, None] * out[None]
         w = jnp.concatenate([out[None], w[:-1]])  # (depth, M, G): u_{k - i}
-        gram = gram + mk * w[:, None] * w[None, :]
-        return (valve, z, w, gram, rhs + (mk * yk) * w, total + mk * w), None
+        return (
+            valve,
+            z,
+            w,
+            lagged + (mk * out)[None] * w,
+            rhs + (mk * yk) * w,
+            total + mk * out,
+            jnp.where(mk > 0, w, last),
+        ), None
 
     return lax.scan(body, carry, (v, y, mask))[0]
+
+
+def _lagged_gram(
+    lagged: np.ndarray, total: np.ndarray, last: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    r"""The sums $G_{ij} = \sum_{k<n} u_{k-i} u_{k-j}$ `(D, D, ...)` and
+    $T_i = \sum_{k<n} u_{k-i}$ `(D, ...)` from their first row
+    $G_{0j}$ (`lagged`), $T_0$ (`total`) and the last lagged inputs
+    $l_t = u_{n-1-t}$ (`last`, `(D, ...)`), with $u_k = 0$ for $k < 0$: a lag
+    more on both sides drops the last product,
+    $G_{i+1, j+1} = G_{ij} - l_i l_j$ and $T_{i+1} = T_i - l_i$, so
+    $G_{ij} = G_{0, j-i} - \sum_{t<i} l_t l_{t+j-i}$ ($i \le j$)."""
+    D = lagged.shape[0]
+    gram = np.empty((D, D, *lagged.shape[1:]))
+    for i in range(D):
+        for j in range(i, D):
+            d = j - i
+            g = lagged[d] - np.sum(last[:i] * last[d : d + i], axis=0)
+            gram[i, j] = gram[j, i] = g
+    drop = np.concatenate([np.zeros_like(last[:1]), np.cumsum(last[:-1], axis=0)])
+    return gram, total[None] - drop
 
 
 def _profile_sums(
@@ -247,7 +276,9 @@ def _profile_sums(
     valve (`_valve_step`, at rest at $v_0$), its input $u = F(x)$ filtered by
     $1/A$ ($a_0 = 1$, direct form II transposed from rest, as `lfilter_numpy`)
     and, with $w_i = u_{k-i}$ for the lags $i < D$ (zero before the start), the
-    sums over the record of $w_i w_j$, $w_i y_k$ and $w_i$. As separate passes
+    sums over the record of $w_i w_j$, $w_i y_k$ and $w_i$; of the first and
+    the last only their first row, the rest from the record's last lagged
+    inputs (`_lagged_gram`: $D$ products a step instead of $D^2$). As separate passes
     over a grid x time array the profile was memory-bound; this way it is
     compute-bound (and runs on every core: `diagnose_many`'s threads)."""
     n, B = v.shape[0], PROFILE_BLOCK
@@ -262,8 +293,9 @@ def _profile_sums(
         _valve_init(jnp.asarray(v[0]), width),
         jnp.zeros((a.shape[0] - 1, *shape)),
         jnp.zeros((depth, *shape)),
-        jnp.zeros((depth, depth, *shape)),
         jnp.zeros((depth, *shape)),
+        jnp.zeros((depth, *shape)),
+        jnp.zeros(shape),
         jnp.zeros((depth, *shape)),
     )
     for k in range(0, total_len, B):
@@ -279,7 +311,8 @@ def _profile_sums(
             slide=slide,
             mapped=mapped,
         )
-    gram, rhs, total = (np.asarray(x) for x in carry[3:])
+    lagged, rhs, total, last = (np.asarray(x) for x in carry[3:])
+    gram, total = _lagged_gram(lagged, total, last)
     return (
         np.moveaxis(gram, (2, 3), (0, 1)),
         np.moveaxis(rhs, (1, 2), (0, 1)),

@@ -145,7 +145,8 @@ def test_a_sticky_valve_kept_by_the_likelihood_through_the_noise_model(
     assert veto["z"] < Z_STAR, veto  # the held-out test alone would not keep it
     lr = veto["lr"]
     assert lr["lr"] > 2 * lr["threshold"] and lr["z_validation"] > Z_CONFIRM, lr
-    assert veto["significant"] and r["effect"] == "backlash", r["tests"]
+    assert veto["significant"] and veto["by"] == "likelihood_ratio", veto
+    assert r["effect"] == "backlash", r["tests"]
 
 
 def test_a_periodic_input_is_not_tested():

@@ -18,6 +18,7 @@ from hamjax.diagnosis.layout import (
     STATIC_BAND_GRID,
     VARIANTS,
     _free_numerator_sse,
+    _lagged_sums,
     _profile_block,
     _profile_sums,
     _refit_denominator,
@@ -218,6 +219,12 @@ def test_profile_sums_against_the_host_path():
         )
         for k, u in enumerate([piecewise_linear_map(x, *pl, xp=np), x]):
             w = lfilter([1.0], a, u, axis=-1)
+            # every lagged sum, though the scan accumulates only their first
+            # row (`_lagged_gram` derives the rest from the last inputs)
+            sums = _lagged_sums(w, y, np.arange(4))
+            for got, want in zip((gram[k], rhs[k], total[k]), sums, strict=True):
+                scale = np.max(np.abs(want))
+                np.testing.assert_allclose(got, want, rtol=0, atol=1e-12 * scale)
             for lags, level in [(np.array([1, 2, 3]), True), (np.arange(4), False)]:
                 sse, coef = _free_numerator_sse(w, y, lags, level=level)
                 sse2, coef2 = _solve_lagged(

@@ -237,6 +237,7 @@ breakpoints, so there the `dead_zone` candidate is dropped (it *is*
 `parameter_mismatch`).
 """
 
+import functools as ft
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -460,19 +461,32 @@ def _nested_lr(
 
 
 def _lr_through_noise(
-    prep: Prepared, fit: dict, pm: Candidate, best: Candidate, m: int, z: float
+    prep: Prepared,
+    fit: dict,
+    pm: Candidate,
+    best: Candidate,
+    m: int,
+    z: float | None = None,
+    *,
+    noise: Candidate | None = None,
 ) -> dict | None:
     """`_nested_lr` of the structural candidate `best` over the re-fit `pm`, both
     fitted by prediction error with the noise model fixed (`fit["whitened"]`,
     `schedule.whitening_items`), on their estimation sums of squared one-step
-    errors, confirmed by `z` (the two validation residuals through the same
-    predictor). None where either row was not fitted so, or where `best` frees
-    no more parameters than `pm` (no nested test)."""
+    errors, confirmed by `z`: the two validation residuals through the same
+    predictor (given, or computed here through `noise`'s). None where either row
+    was not fitted so, where `best` frees no more parameters than `pm` (no
+    nested test), or where a residual is not finite."""
     white = fit.get("whitened")
     if white is None or not {pm.row, best.row} <= set(white.get("rows", ())):
         return None
     if n_fitted(prep, best.row) <= n_fitted(prep, pm.row):  # not nested
         return None
+    if z is None:
+        e_pm, e_best = _predicted(noise, pm.residual), _predicted(noise, best.residual)
+        if e_pm is None or e_best is None:
+            return None
+        z = improvement_z(e_pm, e_best)
     return _nested_lr(prep, finite_sse(white), pm, best, m, z=z)
 
 
@@ -758,9 +772,6 @@ def attribute(prep: Prepared, fit: dict) -> Attribution:
     det = [cands[e] for e in DETERMINISTIC_NAMES if e in cands]
     n_structural = sum(c.effect != "parameter_mismatch" for c in det)
 
-    def lr_pe(pm: Candidate, best: Candidate, m: int, z: float) -> dict | None:
-        return _lr_through_noise(prep, fit, pm, best, m, z)
-
     best_det = min(det, key=lambda c: c.gap_after)
     floor_best = min(noise_floor_hf(best_det.residual), best_det.gap_after)
     tests = {
@@ -823,7 +834,12 @@ def attribute(prep: Prepared, fit: dict) -> Attribution:
                     if not (refit_ref and c.effect == "parameter_mismatch")
                 ]
                 named = _gap_through_noise(
-                    through(noise_c), cands_pe, det_pe, sig, tests, lr=lr_pe
+                    through(noise_c),
+                    cands_pe,
+                    det_pe,
+                    sig,
+                    tests,
+                    lr=ft.partial(_lr_through_noise, prep, fit),
                 )
                 if named is not None and not (
                     prep.fitted and named.effect == "parameter_mismatch"
@@ -849,19 +865,19 @@ def attribute(prep: Prepared, fit: dict) -> Attribution:
             tests["deterministic_over_noise"] = test
             if not test["significant"] and chosen.effect != "parameter_mismatch":
                 # or by likelihood: over the re-fit, both by prediction error
-                pm, d = cands_pe["parameter_mismatch"], cands_pe[chosen.effect]
-                e_pm, e_d = (
-                    _predicted(noise_c, pm.residual),
-                    _predicted(noise_c, d.residual),
+                lr_test = _lr_through_noise(
+                    prep,
+                    fit,
+                    cands_pe["parameter_mismatch"],
+                    cands_pe[chosen.effect],
+                    n_structural,
+                    noise=noise_c,
                 )
-                if e_pm is not None and e_d is not None:
-                    z = improvement_z(e_pm, e_d)
-                    lr_test = lr_pe(pm, d, n_structural, z)
-                    if lr_test is not None:
-                        test["lr"] = lr_test
-                        if lr_test["significant"]:  # the verdict, and why
-                            test["significant"] = True
-                            test["by"] = "likelihood_ratio"
+                if lr_test is not None:
+                    test["lr"] = lr_test
+                    if lr_test["significant"]:  # the verdict, and why
+                        test["significant"] = True
+                        test["by"] = "likelihood_ratio"
             if not test["significant"]:
                 effect, chosen = noise_c.effect, noise_c
                 gap_after = floor = chosen.gap_after

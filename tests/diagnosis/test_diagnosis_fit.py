@@ -220,6 +220,47 @@ def test_the_queues_passes_leave_every_fit_as_one_pass_would(monkeypatch):
             np.testing.assert_allclose(a["theta"], b["theta"], rtol=1e-7, atol=1e-9)
 
 
+def test_the_narrower_tail_batches_leave_every_fit_as_full_batches_would(monkeypatch):
+    # A call's last batches, holding few rows, run at a narrower width (one more
+    # compiled shape, `schedule.TAIL_FRACTION`); a row's fit does not depend on
+    # its batch's width beyond rounding (`fit_padded`), so with the tail batches
+    # and without them every row and every prediction-error fit must agree to
+    # rounding of the other width (1e-9 on the SSE, as the tests above).
+    monkeypatch.setattr(schedule, "SCREEN_STEPS", 2)
+    monkeypatch.setattr(schedule, "FINISH_STEPS", 10)
+    monkeypatch.setattr(schedule, "FIRST_PASS", 3)
+    monkeypatch.setattr(schedule, "TAIL_BATCHES", 1)
+    preps = [
+        prepare(*coloured_case(jr.key(11)), length=512, n_params=13),
+        prepare(*tiny_case(jr.key(6), "backlash", noise=1e-3), length=512, n_params=13),
+    ]
+    run_batch, widths = schedule.run_batch, []
+
+    def spy(take, budgets, rows, arrays, width, *args, **kwargs):
+        widths.append((len(take), width))
+        return run_batch(take, budgets, rows, arrays, width, *args, **kwargs)
+
+    monkeypatch.setattr(schedule, "run_batch", spy)
+    got, used = {}, {}
+    for fraction in (1, 2):
+        monkeypatch.setattr(schedule, "TAIL_FRACTION", fraction)
+        fits = got[fraction] = {}
+        widths.clear()
+        run_queue(preps, 8, lambda c, f, fits=fits: fits.setdefault(c, f))
+        used[fraction] = sorted({w for _, w in widths})
+        assert all(m <= w for m, w in widths)
+    # without the tail every batch is 8 rows wide; with it the short ones are 4
+    assert used[1] == [8] and used[2] == [4, 8], used
+    assert "whitened" in got[2][0]
+    for c in (0, 1):
+        pairs = [(got[1][c], got[2][c])]
+        if "whitened" in got[1][c]:
+            pairs.append((got[1][c]["whitened"], got[2][c]["whitened"]))
+        for a, b in pairs:
+            np.testing.assert_allclose(a["sse_est"], b["sse_est"], rtol=1e-9)
+            np.testing.assert_allclose(a["theta"], b["theta"], rtol=1e-7, atol=1e-9)
+
+
 def test_a_rows_fit_does_not_see_a_diverging_batch_mate():
     # A batch-mate whose parameters are not finite (a diverging trial step) once
     # made every row of its batch NaN: the extra pole's and the delay fraction's

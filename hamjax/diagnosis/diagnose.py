@@ -17,6 +17,7 @@ from .attribute import Attribution, attribute
 from .decide import decide
 from .layout import (
     NOMINAL_UNCERTAINTY,
+    ONE_GROUP,
     bucket,
     describe_nominal,
     n_free_parameters,
@@ -78,9 +79,6 @@ def _not_finite(d: GapDiagnosis) -> str | None:
 # one held-out likelihood for every candidate.
 RULES = {"cascade": attribute, "likelihood": decide}
 DEFAULT_RULE = "cascade"
-
-
-ONE_GROUP = 8192  # records up to this length share one padded length per call
 
 
 def _length_group(n: int) -> int:

@@ -71,6 +71,10 @@ DETERMINISTIC = (
     FeedbackNonlinearityEffect(),
 )
 BUCKETS = (256, 512, 1024, 1536, 2048, 3072, 4096, 6144, 8192, 12288, 16384)
+# Records up to this length share one padded length per call (one compilation):
+# the fits follow each record's own length (`fit.normal_equations`), so their
+# padding costs memory, not time.
+ONE_GROUP = 8192
 N_MAX = 4
 T_MAX = 64
 MAX_EFFECT_SLOTS = 2  # most slots any one candidate row frees

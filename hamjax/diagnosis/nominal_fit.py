@@ -49,6 +49,7 @@ from .layout import (
     FITTED_ORDER,
     MAX_EFFECT_SLOTS,
     N_MAX,
+    ONE_GROUP,
     bucket,
     looks_closed_loop,
     nominal_output,
@@ -286,14 +287,24 @@ def _fit_structures(jobs: list, length: int) -> list:
 
 def fit_nominal_many(cases: Sequence[tuple[float, dict]]) -> list[Hammerstein]:
     """`fit_nominal` of each `(dt, estimation)`: every candidate structure of the
-    cases whose records share a padded length (`layout.bucket`) fitted in one
-    batch (`_fit_structures`; padding changes only rounding), so a call with
-    many cases compiles once per length and runs the fits side by side."""
+    cases whose records share a padded length fitted in one batch
+    (`_fit_structures`; padding changes only rounding), so a call with many
+    cases compiles once per length and runs the fits side by side. Records up to
+    `layout.ONE_GROUP` samples are padded to that length, longer ones to their
+    `layout.bucket` (a case's padding is its own, whatever the others); the
+    fits follow each record's own length, so the padding costs no time
+    (seed-1 control loops, 80 records of 1000-4100 samples in five buckets:
+    one compilation instead of five, the nominal fits 34 -> 25 s on 2 cores,
+    every nominal's structure the same). Within a length, the cases go in
+    order of their records' lengths, so that a batch holds records alike."""
     per_case = [_structures(dt, est) for dt, est in cases]
     fitted: dict[int, list] = {}
-    lengths = [bucket(est["v"].shape[0]) for _, est in cases]
+    n = [est["v"].shape[0] for _, est in cases]
+    lengths = [max(bucket(k), ONE_GROUP) for k in n]
     for length in sorted(set(lengths)):
-        members = [c for c, n in enumerate(lengths) if n == length]
+        members = sorted(
+            (c for c, k in enumerate(lengths) if k == length), key=n.__getitem__
+        )
         jobs = [
             (cases[c][0], *structure[1:])
             for c in members

@@ -240,16 +240,18 @@ def test_a_closed_loop_record_gets_a_strictly_proper_consistent_nominal(monkeypa
 @pytest.mark.slow
 def test_many_records_in_one_batch_fit_as_each_alone():
     # `fit_nominal_many` pads every structure of the records of one padded
-    # length to it and fits them side by side: each nominal must be that
-    # record's own `fit_nominal` (same structure; coefficients to rounding,
-    # 1e-8 relative, far below the 1e-6 of the fits' own stopping tolerance)
+    # length to it (`layout.ONE_GROUP` for records up to that length) and fits
+    # them side by side, in batches of records alike in length: each nominal
+    # must be that record's own `fit_nominal` (same structure; coefficients to
+    # rounding, 1e-8 relative, far below the 1e-6 of the fits' own stopping
+    # tolerance)
     from hamjax.diagnosis.nominal_fit import fit_nominal_many
 
     dt = 0.05
     nl = hj.PiecewiseLinear(k1=1.5, k2=0.7, d1=0.2, d2=-0.3)
     lin = hj.DiscreteTransferFunction([0.0, 0.2, 0.1], [1.0, -1.1, 0.4], dt)
     records = []
-    # 600 and 900 samples share a padded length (1024); 400 has its own (512)
+    # of three lengths, padded to one (each alone to the same)
     for i, n in enumerate((600, 900, 400)):
         v = staircase(jr.key(10 + i), n)
         rec = _record(hj.Hammerstein(nl, lin), v, dt)

@@ -400,9 +400,11 @@ def fit_padded(
         raise ValueError(f"{m} rows for a batch of {width}")
     pad = np.r_[np.arange(m), np.zeros(width - m, int)]
     resume = np.zeros(m, bool) if resume is None else np.asarray(resume, bool)
+    # a full batch is its rows as gathered: no second copy of the cases' records
+    gather = (lambda x: np.asarray(x)) if m == width else (lambda x: np.asarray(x)[pad])
     fit = fit_batch(
-        jax.tree.map(lambda x: np.asarray(x)[pad], rows),
-        jax.tree.map(lambda x: np.asarray(x)[pad], cases),
+        jax.tree.map(gather, rows),
+        jax.tree.map(gather, cases),
         np.where(np.arange(width) < m, np.asarray(budgets)[pad], 0),
         np.asarray(lam0, float)[pad],
         while_compiling,

@@ -158,7 +158,8 @@ def test_stable_candidates_are_scored_by_their_fit_sse(monkeypatch):
 def test_nominal_fits_in_passes_are_the_fits_in_one(monkeypatch):
     # The nominal's structures are fitted in batches of NOMINAL_BATCH rows, first
     # for NOMINAL_FIRST_PASS steps, the rows still moving then resumed exactly
-    # (`fit_batch`'s `resume`, through `fit_padded`) for the rest of NOMINAL_STEPS. Three structures in
+    # (`fit_batch`'s `resume`, through `fit_padded`) for the rest of
+    # NOMINAL_STEPS. Three structures in
     # batches of two (one padded) with a 4-step first pass, against one pass of
     # the whole budget: the same fits to rounding of the other batch widths (1e-9
     # on the SSE; a lost or repeated step moves an unconverged fit by far more).

@@ -272,6 +272,7 @@ EFFECT_SLOT_NAMES = {e.name: tuple(e.slots) for e in DETERMINISTIC if e.slots}
 LEVEL_SLOT_NAMES = {e.name: tuple(e.level) for e in DETERMINISTIC}
 FRICTION = next(e for e in DETERMINISTIC if e.name == "friction")
 BACKLASH = next(e for e in DETERMINISTIC if e.name == "backlash")
+EXTRA_POLE = next(e for e in DETERMINISTIC if e.name == "extra_pole")
 
 
 @dataclass
@@ -398,6 +399,13 @@ def _params(prep: Prepared, fit: dict, row: int, effect: str) -> dict:
     if effect == "friction":
         # which velocity the friction acts on: "output" (s = w) or "derivative"
         out["velocity"] = {"value": FRICTION.velocity(used), "std": 0.0}
+    if effect == "extra_pole" and used:
+        # which lag: the discrete pole of the contract or a continuous lag
+        # behind an output that moves between samples; its time constant
+        pole = next(out[n]["value"] for n in ("pole", "lag_pole") if n in out)
+        tc = -prep.ctx.dt / np.log(pole) if 0 < pole < 1 else 0.0
+        out["form"] = {"value": EXTRA_POLE.form(used), "std": 0.0}
+        out["time_constant_seconds"] = {"value": float(tc), "std": 0.0}
     if effect == "time_delay":
         tau = int(prep.rows[row][1].tau) + out.get("delay_frac", {}).get("value", 0.0)
         std = out.get("delay_frac", {}).get("std", 0.0)

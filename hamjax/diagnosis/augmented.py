@@ -51,7 +51,7 @@ from .effects.backlash import (
     stick_slip_step,
 )
 from .effects.dead_zone import DeadZoneEffect, dead_zone
-from .effects.extra_pole import ExtraPoleEffect
+from .effects.extra_pole import ExtraPoleEffect, lag_factor
 from .effects.feedback_nonlinearity import (
     FeedbackNonlinearityEffect,
     feedback_force,
@@ -452,12 +452,13 @@ def named(p: Float[Array, " S"], case: CaseArrays) -> Callable[[str], Array]:
 
 def filter_coefficients(p: Float[Array, " S"], case: CaseArrays) -> tuple[Array, Array]:
     """`(b, a)` of the whole linear part: the re-fitted block times the extra lag
-    $(1-p)/(1-p q^{-1})$ and the delay's fraction of a sample
+    (`extra_pole.lag_factor`: $(1-p)/(1-p q^{-1})$ or its continuous form, two
+    taps either way) and the delay's fraction of a sample
     (`time_delay.fractional_split`; linear, so folded into one filter)."""
     b, a = linear_polynomials(p, case)
-    pole = jnp.clip(named(p, case)("pole"), 0.0, 0.995)
-    b = polymul(b, jnp.stack([1 - pole, jnp.zeros(())]))
-    a = polymul(a, jnp.stack([jnp.ones(()), -pole]))
+    at = named(p, case)
+    num, den = lag_factor(*(jnp.clip(at(n), 0.0, 0.995) for n in ("pole", "lag_pole")))
+    b, a = polymul(b, num), polymul(a, den)
     return fractional_split(b, a, named(p, case)("delay_frac"))
 
 

@@ -38,7 +38,11 @@ and the tried candidates the rest in proportion to
 $\exp(-\tfrac{N}{2T}\log m)$, $T = 200$ (maximum likelihood of the true class
 among the rivals of a wrong verdict, same family-A cases, on a grid); every class
 of the contract is a candidate. No class is given more than the named effect: an
-excess is moved to the classes below it.
+excess is moved to the classes below it. **Named `unexplained`** (the best
+candidate closes less than half of the gap: shrink $< 0.5$), the same share
+$1 - \mathrm{shrink}$ is its probability and the candidates share the rest
+(before 2026-12-05 it was given 1, the certainty of a verdict that says how
+little was explained; family B seed 9 named it twice, both wrong, at 1.00).
 """
 
 import math
@@ -125,7 +129,7 @@ def probabilities(
     """
     p_named = named_confidence(effect, mse, n) if effect != "unexplained" else 0.0
     rest = 1.0 - p_named
-    unexplained = 1.0 if effect == "unexplained" else min(max(1.0 - shrink, 0.0), 1.0)
+    unexplained = min(max(1.0 - shrink, 0.0), 1.0)
     unexplained = unexplained if math.isfinite(unexplained) else 1.0
     rivals = [k for k in mse if k != effect]
     out = dict.fromkeys(CLASSES, 0.0)

@@ -65,3 +65,15 @@ def test_what_the_named_effect_leaves_above_the_floor_is_unexplained():
     assert half["unexplained"] > 0 and half["saturation"] == pytest.approx(
         full["saturation"]
     )
+
+
+def test_an_unexplained_gap_is_as_sure_as_the_share_the_best_fit_leaves():
+    # named `unexplained` where the best candidate closes 30 % of the gap: its
+    # probability is the 70 % left, the candidates share the other 30 %
+    mse = dict(_mse([1.0] * len(CANDIDATES)), saturation=0.5)
+    p = probabilities("unexplained", mse, 1000, 0.3)
+    assert p["unexplained"] == pytest.approx(0.7, rel=1e-12)
+    assert sum(v for k, v in p.items() if k != "unexplained") == pytest.approx(0.3)
+    assert p["saturation"] == max(v for k, v in p.items() if k != "unexplained")
+    # a shrink at or below 0 leaves it all unexplained
+    assert probabilities("unexplained", mse, 1000, -0.2)["unexplained"] == 1.0

@@ -243,6 +243,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .augmented import EFFECT_SLOTS, NL_PIECEWISE, slot_names
+from .effects.extra_pole import lag_samples
 from .layout import (
     DETERMINISTIC,
     LR_ALPHA,
@@ -403,9 +404,9 @@ def _params(prep: Prepared, fit: dict, row: int, effect: str) -> dict:
         # which lag: the discrete pole of the contract or a continuous lag
         # behind an output that moves between samples; its time constant
         pole = next(out[n]["value"] for n in ("pole", "lag_pole") if n in out)
-        tc = -prep.ctx.dt / np.log(pole) if 0 < pole < 1 else 0.0
+        tc = lag_samples(pole) * prep.ctx.dt
         out["form"] = {"value": EXTRA_POLE.form(used), "std": 0.0}
-        out["time_constant_seconds"] = {"value": float(tc), "std": 0.0}
+        out["time_constant_seconds"] = {"value": tc, "std": 0.0}
     if effect == "time_delay":
         tau = int(prep.rows[row][1].tau) + out.get("delay_frac", {}).get("value", 0.0)
         std = out.get("delay_frac", {}).get("std", 0.0)

@@ -459,7 +459,7 @@ def filter_coefficients(p: Float[Array, " S"], case: CaseArrays) -> tuple[Array,
     at = named(p, case)
     num, den = lag_factor(*(jnp.clip(at(n), 0.0, 0.995) for n in ("pole", "lag_pole")))
     b, a = polymul(b, num), polymul(a, den)
-    return fractional_split(b, a, named(p, case)("delay_frac"))
+    return fractional_split(b, a, at("delay_frac"))
 
 
 def memory_arguments(p: Float[Array, " S"], case: CaseArrays) -> tuple:

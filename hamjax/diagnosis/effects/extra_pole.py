@@ -43,6 +43,12 @@ def lag_pole(t: float) -> float:
     return float(min(np.exp(-1.0 / max(t, 1e-12)), 0.995 * UNIT_MAX))
 
 
+def lag_samples(p: float) -> float:
+    """The time constant in samples, $-1/\\ln p$, of a lag of pole $p$ (the inverse
+    of `lag_pole`); 0 outside $0 < p < 1$."""
+    return float(-1.0 / np.log(p)) if 0 < p < 1 else 0.0
+
+
 def held_lag(p: Float[Array, ""]) -> tuple[Float[Array, " 2"], Float[Array, " 2"]]:
     r"""`(num, den)` in $q^{-1}$ of a continuous first-order lag $1/(Ts + 1)$ whose
     input is linear between its samples (first-order hold), $p = e^{-h/T}$:

@@ -251,6 +251,7 @@ from .layout import (
     Prepared,
     best_row_per_class,
     finite_sse,
+    n_beyond,
     n_fitted,
     validation_sse,
 )
@@ -441,6 +442,12 @@ def _nested_lr(
     from, $2 \\ln(m / \\alpha)$, which bounds the $\\chi^2_1$ one too; a row with
     $k > 2$ more parameters than the re-fit (a `REFIT_LINEAR` row, which re-fits
     the numerator as well) gets its own $\\chi^2_k$ quantile at $\\alpha / m$.
+    $k$ counts the slots the candidate frees beyond the re-fit's (`n_beyond`):
+    where it does not free all of the re-fit's (a profile start that re-fits the
+    numerator with the map held at identity) the test is that of the model
+    freeing both, which nests each; its optimum is at most the candidate's SSE,
+    so the ratio is a lower bound of that model's, and the test keeps its level.
+    A candidate that frees nothing beyond the re-fit is nested in it: no test.
     Because the test trusts the noise to be white and the re-fit to be at its
     optimum, the candidate must also improve on the re-fit on validation with
     $z > 2$.
@@ -449,11 +456,11 @@ def _nested_lr(
     prediction-error fits' sums of squared one-step errors $A(q) r$ (the
     innovations, white under the noise model: the same $\\chi^2_k$) and `z` the
     validation $z$ of the two seen through $A$."""
-    p = n_fitted(prep, best.row)
+    k = n_beyond(prep, best.row, pm.row)
+    p = n_fitted(prep, pm.row) + k
     s2 = sse[best.row] / max(prep.n_est - p, 1)
     lr = float((sse[pm.row] - sse[best.row]) / s2) if s2 > 0 else 0.0
     threshold = 2.0 * np.log(m / LR_ALPHA)
-    k = p - n_fitted(prep, pm.row)
     if k > 2:
         from scipy.stats import chi2
 
@@ -465,7 +472,9 @@ def _nested_lr(
         "threshold": float(threshold),
         "z_validation": z,
         "best": best.effect,
-        "significant": bool(np.isfinite(lr) and lr > threshold and z > Z_CONFIRM),
+        "significant": bool(
+            k > 0 and np.isfinite(lr) and lr > threshold and z > Z_CONFIRM
+        ),
     }
 
 
@@ -484,12 +493,12 @@ def _lr_through_noise(
     `schedule.whitening_items`), on their estimation sums of squared one-step
     errors, confirmed by `z`: the two validation residuals through the same
     predictor (given, or computed here through `noise`'s). None where either row
-    was not fitted so, where `best` frees no more parameters than `pm` (no
+    was not fitted so, where `best` frees nothing beyond `pm` (`n_beyond`: no
     nested test), or where a residual is not finite."""
     white = fit.get("whitened")
     if white is None or not {pm.row, best.row} <= set(white.get("rows", ())):
         return None
-    if n_fitted(prep, best.row) <= n_fitted(prep, pm.row):  # not nested
+    if n_beyond(prep, best.row, pm.row) == 0:  # nested in the re-fit
         return None
     if z is None:
         e_pm, e_best = _predicted(noise, pm.residual), _predicted(noise, best.residual)

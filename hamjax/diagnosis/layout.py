@@ -1079,6 +1079,13 @@ def n_fitted(prep: Prepared, row: int) -> int:
     return int(np.sum(np.asarray(prep.rows[row][1].idx) < prep.arrays.anchor.shape[0]))
 
 
+def n_beyond(prep: Prepared, row: int, ref: int) -> int:
+    """Slots row `row` frees that row `ref` does not: the parameters by which the
+    model freeing both (their union, which nests each) exceeds `ref`'s."""
+    free = np.asarray(prep.rows[row][1].free)
+    return int(np.sum(free & ~np.asarray(prep.rows[ref][1].free)))
+
+
 def best_row_per_class(
     prep: Prepared, sse: np.ndarray, val_sse: np.ndarray
 ) -> dict[str, int]:

@@ -15,9 +15,11 @@ from hamjax.diagnosis.attribute import (
     Candidate,
     _gap_through_noise,
     _lr_through_noise,
+    _nested_lr,
     rms,
     significant,
 )
+from hamjax.diagnosis.layout import LR_ALPHA
 from hamjax.diagnosis.noise_fit import predictor_errors
 
 
@@ -98,16 +100,21 @@ def test_no_effect_keeps_the_stated_level():
     assert count <= 6, count
 
 
-def _nested_prep(n: int, p_refit: int, p_effect: int):
+def _nested_prep(n: int, p_refit, p_effect):
     """A stand-in for `layout.Prepared` with what the nested test reads: row 0
-    the re-fit (`p_refit` fitted slots), row 1 the effect's (`p_effect`)."""
-    slots = max(p_refit, p_effect)
+    the re-fit, row 1 the effect's; each given as a number of fitted slots (the
+    first ones) or as the fitted slots themselves."""
+    sets = [
+        set(range(p)) if isinstance(p, int) else set(p) for p in (p_refit, p_effect)
+    ]
+    slots = max(max(s, default=-1) for s in sets) + 1
     pad = slots + 1  # an index past the slots: padding, not fitted
 
-    def row(p):
-        return SimpleNamespace(idx=np.r_[np.arange(p), np.full(slots - p, pad)])
+    def row(fitted):
+        idx = sorted(fitted) + [pad] * (slots - len(fitted))
+        return SimpleNamespace(idx=np.asarray(idx), free=np.isin(np.arange(slots), idx))
 
-    rows = [("parameter_mismatch", row(p_refit)), ("backlash", row(p_effect))]
+    rows = [("parameter_mismatch", row(sets[0])), ("backlash", row(sets[1]))]
     return SimpleNamespace(
         rows=rows, arrays=SimpleNamespace(anchor=np.zeros(slots)), n_est=n
     )
@@ -171,5 +178,31 @@ def test_the_likelihood_ratio_through_the_noise_model_needs_nested_whitened_fits
     half = {"whitened": {"sse_est": fit["whitened"]["sse_est"], "rows": [0]}}
     assert _lr_through_noise(_nested_prep(100, 3, 4), half, pm, best, 4, z=3.0) is None
     assert _lr_through_noise(_nested_prep(100, 3, 4), {}, pm, best, 4, z=3.0) is None
-    # as many parameters as the re-fit: not nested, no test
+    # as many parameters as the re-fit and all of them the re-fit's: nested in
+    # it, no test
     assert _lr_through_noise(_nested_prep(100, 4, 4), fit, pm, best, 4, z=3.0) is None
+
+
+def test_the_nested_test_counts_the_slots_beyond_the_refit():
+    # A profile start that re-fits the numerator with the map held at identity
+    # frees as many slots as a re-fit of the map and the poles, not the same
+    # ones: the model freeing both nests each, and the test is that model's,
+    # with k the slots beyond the re-fit's (here 2: the chi^2_2 bound), the
+    # residual variance on n - (p_refit + k) degrees of freedom.
+    pm, best = _candidates()
+    refit, effect = {0, 1, 2, 3}, {0, 1, 4, 5}
+    fit = {"whitened": {"sse_est": np.array([10.0, 5.0]), "rows": [0, 1]}}
+    prep = _nested_prep(100, refit, effect)
+    test = _lr_through_noise(prep, fit, pm, best, 4, z=3.0)
+    assert test is not None and test["significant"], test
+    assert np.isclose(test["lr"], (10.0 - 5.0) / (5.0 / (100 - 6)))
+    assert np.isclose(test["threshold"], 2 * np.log(4 / LR_ALPHA))
+    # five slots beyond the re-fit's: the chi^2_5 quantile at alpha / m
+    prep = _nested_prep(100, refit, {0, *range(4, 9)})
+    test = _nested_lr(prep, fit["whitened"]["sse_est"], pm, best, 4, z=3.0)
+    assert np.isclose(test["threshold"], scipy.stats.chi2.isf(LR_ALPHA / 4, 5))
+    assert np.isclose(test["lr"], 5.0 / (5.0 / (100 - 9)))
+    # every slot of the candidate is the re-fit's: nested in it, never significant
+    prep = _nested_prep(100, refit, {0, 1})
+    test = _nested_lr(prep, fit["whitened"]["sse_est"], pm, best, 4, z=3.0)
+    assert not test["significant"], test

@@ -68,9 +68,9 @@ def lag_factor(
     (`held_lag`): one factor of two taps, exact where at most one of them is
     non-zero (every row frees one, the other stays at its neutral 0), of unit
     static gain always; the identity at $0, 0$."""
-    held, _ = held_lag(lag_pole)
-    num = held + jnp.stack([-pole, jnp.zeros_like(pole)])
-    return num, jnp.stack([jnp.ones_like(pole), -(pole + lag_pole)])
+    num, den = held_lag(lag_pole)
+    discrete = jnp.stack([jnp.zeros_like(pole), -pole])  # (1 - p) / (1 - p q^-1)
+    return num + jnp.stack([-pole, jnp.zeros_like(pole)]), den + discrete
 
 
 class ExtraPoleEffect(AbstractEffect):

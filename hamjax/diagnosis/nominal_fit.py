@@ -8,6 +8,12 @@ by BIC on the estimation record.
 Each order is started from the least-squares ARX fit with $F$ = identity and then
 refined by output-error least squares over the poles and either the six
 piecewise-linear parameters or the gain (the numerator shape stays the ARX one).
+Behind the order, a dead time of $d$ samples: $B = q^{-d}(b_0 + \dots + b_n
+q^{-n})$, $d$ chosen per order by the ARX stage (`arx_delay`: the least one-step
+SSE over the same samples, the same parameter count for every $d$), as far as
+the block keeps within `FITTED_ORDER` lags ($n + d \le 3$, an integrating block's
+numerator one lag more), so a first-order process behind a dead time is that,
+not a third-order block imitating it.
 The identity map is what an input with only a few levels (two, in a step test)
 can determine; a piecewise-linear map there is not identifiable. Fits whose
 poles left the unit circle are not candidates.
@@ -72,25 +78,48 @@ HIGH_ORDER = 20
 
 
 def _arx_lstsq(
-    v: np.ndarray, y: np.ndarray, n: int, *, direct: bool = True
+    v: np.ndarray,
+    y: np.ndarray,
+    n: int,
+    *,
+    direct: bool = True,
+    delay: int = 0,
+    skip: int = 0,
 ) -> tuple[np.ndarray, np.ndarray, float]:
-    """Least-squares ARX fit of order `n`: `(b, a, sse)` (one-step errors on
-    samples `n..`), $b_0$ fitted if `direct`, else exactly 0 (strictly proper)."""
-    first = 0 if direct else 1
+    """Least-squares ARX fit of order `n` behind `delay` samples of dead time:
+    `(b, a, sse)`, `b` of length `n + delay + 1` (one-step errors on samples
+    `n + delay + skip..`), $b_0$ fitted if `direct` and there is no delay, else
+    exactly 0 (strictly proper)."""
+    first = (0 if direct else 1) + delay
+    last = n + delay  # the numerator's lags: first..last
+    m = last + skip
     N = v.shape[0]
-    cols = [-y[n - i : N - i] for i in range(1, n + 1)]
-    cols += [v[n - i : N - i] for i in range(first, n + 1)]
+    cols = [-y[m - i : N - i] for i in range(1, n + 1)]
+    cols += [v[m - i : N - i] for i in range(first, last + 1)]
     X = np.column_stack(cols)
-    theta, *_ = np.linalg.lstsq(X, y[n:], rcond=None)
-    sse = float(np.sum(np.square(y[n:] - X @ theta)))
+    theta, *_ = np.linalg.lstsq(X, y[m:], rcond=None)
+    sse = float(np.sum(np.square(y[m:] - X @ theta)))
     return np.r_[np.zeros(first), theta[n:]], np.r_[1.0, theta[:n]], sse
 
 
+def arx_delay(
+    v: np.ndarray, y: np.ndarray, n: int, *, direct: bool, max_delay: int
+) -> int:
+    """The dead time, 0 to `max_delay` samples, of the order-`n` ARX model of
+    least one-step SSE over the same samples for every delay (the same number of
+    parameters each: the lowest SSE is the highest likelihood)."""
+    sse = [
+        _arx_lstsq(v, y, n, direct=direct, delay=d, skip=max_delay - d)[2]
+        for d in range(max_delay + 1)
+    ]
+    return int(np.argmin(sse))
+
+
 def _arx(
-    v: np.ndarray, y: np.ndarray, n: int, *, direct: bool = True
+    v: np.ndarray, y: np.ndarray, n: int, *, direct: bool = True, delay: int = 0
 ) -> tuple[np.ndarray, np.ndarray]:
     """`_arx_lstsq`'s `(b, a)`, its unstable roots reflected (a start)."""
-    b, a, _ = _arx_lstsq(v, y, n, direct=direct)
+    b, a, _ = _arx_lstsq(v, y, n, direct=direct, delay=delay)
     # keep the start stable: reflect unstable roots inside the unit circle
     roots = np.roots(a)
     roots = np.where(np.abs(roots) >= 0.999, 0.98 / np.conj(roots), roots)
@@ -180,7 +209,11 @@ def _structures(dt: float, estimation: dict):
     for integrating, orders in ((False, ORDERS), (True, INTEGRATING_ORDERS)):
         record = increments if integrating else estimation
         for n in orders:
-            b, a = _arx(v, record["y"], n, direct=direct)
+            # the dead time that keeps the block within FITTED_ORDER lags (an
+            # integrating block's numerator gains one)
+            most = FITTED_ORDER - n - int(integrating)
+            d = arx_delay(v, record["y"], n, direct=direct, max_delay=max(most, 0))
+            b, a = _arx(v, record["y"], n, direct=direct, delay=d)
             for nl in (PiecewiseLinear(k1=1.0, k2=1.0), Identity()):
                 out.append((integrating, record, nl, b, a))
     return out, direct

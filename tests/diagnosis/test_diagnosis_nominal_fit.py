@@ -264,3 +264,51 @@ def test_many_records_in_one_batch_fit_as_each_alone():
         assert type(got.nonlinearity) is type(alone.nonlinearity)
         for x, y in ((got.linear.b, alone.linear.b), (got.linear.a, alone.linear.a)):
             np.testing.assert_allclose(np.asarray(x), np.asarray(y), rtol=1e-8)
+
+
+@pytest.mark.parametrize("direct", [True, False])
+@pytest.mark.parametrize("delay", [0, 1, 2])
+def test_arx_delay_recovers_the_dead_time(delay, direct):
+    # Noise-free data of a first-order block behind `delay` samples of dead
+    # time (and, for a closed-loop record, the sample of the hold): the ARX fit
+    # at the true delay is exact (SSE at rounding), at any other it is not (a
+    # tap outside its lags), so
+    # `arx_delay` must return the true one and `_arx` the true coefficients.
+    from scipy import signal
+
+    from hamjax.diagnosis.nominal_fit import _arx, arx_delay
+
+    v = np.random.default_rng([3, delay]).standard_normal(500)
+    # order 1: the numerator's lags delay..delay+1 (b_0 free), or delay+1
+    # alone (closed loop, b_0 = 0); every tap nonzero, so no other delay holds it
+    b_true = np.r_[np.zeros(delay), [0.4, 0.25] if direct else [0.0, 0.4]]
+    a_true = np.array([1.0, -0.7])
+    y = signal.lfilter(b_true, a_true, v)
+    d = arx_delay(v, y, 1, direct=direct, max_delay=2)
+    assert d == delay
+    b, a = _arx(v, y, 1, direct=direct, delay=d)
+    np.testing.assert_allclose(a, a_true, atol=1e-10)
+    np.testing.assert_allclose(b, b_true[: b.shape[0]], atol=1e-10)
+    assert b.shape[0] == 2 + delay
+
+
+@pytest.mark.slow
+def test_a_delayed_plant_gets_its_dead_time_not_a_higher_order():
+    # A first-order block behind two samples of dead time (b nonzero at lag 3
+    # only), identity map, noise-free staircase: an order-3 block can imitate
+    # the dead time (its numerator's lags 0-3), but the order-1 block behind
+    # the delay `arx_delay` selects is exact with three fewer parameters, so
+    # BIC must pick it: an order-1 denominator, a numerator at lag 3, and the
+    # output reproduced (1e-6 of its range: the refinement's stopping
+    # tolerance).
+    dt = 0.1
+    lin = hj.DiscreteTransferFunction([0.0, 0.0, 0.0, 0.3], [1.0, -0.7], dt)
+    plant = hj.Hammerstein(hj.Identity(), lin)
+    v = np.repeat(np.random.default_rng(7).uniform(-1.0, 1.0, 60), 15)
+    rec = _record(plant, v, dt)
+    fitted = fit_nominal(dt, rec)
+    assert np.asarray(fitted.linear.a).shape[0] == 2
+    b = np.asarray(fitted.linear.b)
+    assert np.flatnonzero(np.abs(b) > 1e-6 * np.abs(b).max()).tolist() == [3]
+    err = np.asarray(hj.simulate(fitted, v, dt=dt)) - rec["y"]
+    assert _rms(err) < 1e-6 * np.ptp(rec["y"])

@@ -294,7 +294,7 @@ def _diagnose(args, cases: list, outs, blocks, quiet, verbose) -> int:
     """Diagnose the cases read (`(index, case, out)`), one `diagnose_many` call per
     block of `blocks` (`share`) padded as the whole run (`padding`), writing each
     case as soon as it is done; the number diagnosed."""
-    from ..diagnosis.nominal_fit import fit_nominal_many
+    from ..diagnosis.nominal_fit import describe_structure, fit_nominal_many
     from ..io import model_to_dict, write_json
 
     # every nominal that hamjax fits itself, in one batch (`fit_nominal_many`)
@@ -315,7 +315,7 @@ def _diagnose(args, cases: list, outs, blocks, quiet, verbose) -> int:
         if plant is None:
             plant = fitted[i]
             write_json(out / "nominal_model.json", model_to_dict(plant, case.dt))
-            source = FITTED
+            source = f"{FITTED}: {describe_structure(plant)}"
         else:
             source = f"given ({case.folder / 'model.json'})"
         item[i] = (plant, case.dt, case.estimation, case.validation)
@@ -371,7 +371,7 @@ def _call(
     try:
         diagnose_many(
             [item[i] for i in members],
-            fitted=[where[i][3] == FITTED for i in members],
+            fitted=[where[i][3].startswith(FITTED) for i in members],
             on_result=write,
             rule=args.rule,
             padding=pad,

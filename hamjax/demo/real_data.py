@@ -13,7 +13,7 @@ REAL = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "real"
 def run(key, out: Path) -> list[tuple[str, str]]:
     del key  # measured data: nothing random
     from ..diagnosis.diagnose import diagnose_gap
-    from ..diagnosis.nominal_fit import fit_nominal
+    from ..diagnosis.nominal_fit import describe_structure, fit_nominal
     from ..diagnosis.report import write_diagnosis
     from ..io import model_to_dict, write_json
     from ..papers.gap.real_data import gap_records, real_cases
@@ -31,7 +31,11 @@ def run(key, out: Path) -> list[tuple[str, str]]:
     folder = Path(out) / "real_data"
     name = "cascaded tanks (real measurements)"
     write_diagnosis(
-        d, folder, name, nominal="fitted by hamjax on the estimation record"
+        d,
+        folder,
+        name,
+        nominal="fitted by hamjax on the estimation record: "
+        + describe_structure(plant),
     )
     write_json(folder / "nominal_model.json", model_to_dict(plant, dt))
     save_diagnosis_figures(d, folder, name)

@@ -8,10 +8,10 @@ by BIC on the estimation record.
 Each order is started from the least-squares ARX fit with $F$ = identity and then
 refined by output-error least squares over the poles and either the six
 piecewise-linear parameters or the gain (the numerator shape stays the ARX one).
-Behind the order, a dead time of $d$ samples: $B = q^{-d}(b_0 + \dots + b_n
+Behind the order, a dead time of $d$ samples: $B = q^{-d}(b_0 + \\dots + b_n
 q^{-n})$, $d$ chosen per order by the ARX stage (`arx_delay`: the least one-step
 SSE over the same samples, the same parameter count for every $d$), as far as
-the block keeps within `FITTED_ORDER` lags ($n + d \le 3$, an integrating block's
+the block keeps within `FITTED_ORDER` lags ($n + d \\le 3$, an integrating block's
 numerator one lag more), so a first-order process behind a dead time is that,
 not a third-order block imitating it.
 The identity map is what an input with only a few levels (two, in a step test)
@@ -350,6 +350,25 @@ def fit_nominal_many(cases: Sequence[tuple[float, dict]]) -> list[Hammerstein]:
         _select(dt, est, per_case[c][0], fitted[c], per_case[c][1])
         for c, (dt, est) in enumerate(cases)
     ]
+
+
+def describe_structure(plant: Hammerstein) -> str:
+    """The structure the selection chose for a fitted nominal, in words: the map,
+    the order of the block (an integrator apart), its dead time (the lag of its
+    first nonzero numerator coefficient, the closed loop's sample included)."""
+    b = np.asarray(plant.linear.b, float)
+    a = np.asarray(plant.linear.a, float)
+    integrating = a.shape[0] > 1 and abs(float(np.sum(a))) <= 1e-9 * np.abs(a).sum()
+    order = a.shape[0] - 1 - int(integrating)
+    nonzero = np.flatnonzero(b)
+    delay = int(nonzero[0]) if nonzero.size else 0
+    kind = (
+        "piecewise-linear map"
+        if isinstance(plant.nonlinearity, PiecewiseLinear)
+        else "identity map"
+    )
+    block = f"order {order}" + (" with an integrator" if integrating else "")
+    return f"{kind}, {block}, dead time {delay} sample(s)"
 
 
 def fit_nominal(dt: float, estimation: dict) -> Hammerstein:

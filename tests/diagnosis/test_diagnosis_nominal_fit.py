@@ -312,3 +312,27 @@ def test_a_delayed_plant_gets_its_dead_time_not_a_higher_order():
     assert np.flatnonzero(np.abs(b) > 1e-6 * np.abs(b).max()).tolist() == [3]
     err = np.asarray(hj.simulate(fitted, v, dt=dt)) - rec["y"]
     assert _rms(err) < 1e-6 * np.ptp(rec["y"])
+
+
+def test_the_selected_structure_is_described():
+    # The report's nominal line states what the selection chose (issue 19: the
+    # selection reported): the map, the order apart from an integrator, and the
+    # dead time as the first nonzero numerator lag.
+    from hamjax.diagnosis.nominal_fit import describe_structure
+
+    dt = 0.1
+    stable = hj.Hammerstein(
+        hj.PiecewiseLinear(k1=1.0, k2=1.0),
+        hj.DiscreteTransferFunction([0.0, 0.0, 0.3, 0.1], [1.0, -1.2, 0.35], dt),
+    )
+    assert describe_structure(stable) == (
+        "piecewise-linear map, order 2, dead time 2 sample(s)"
+    )
+    # B / (A (1 - q^-1)) with deg A = 1, as `_select` builds it
+    den = np.convolve([1.0, -0.6], [1.0, -1.0])
+    integrating = hj.Hammerstein(
+        hj.Identity(), hj.DiscreteTransferFunction([0.0, 0.2, 0.0], den, dt)
+    )
+    assert describe_structure(integrating) == (
+        "identity map, order 1 with an integrator, dead time 1 sample(s)"
+    )

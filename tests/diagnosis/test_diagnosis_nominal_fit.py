@@ -272,8 +272,8 @@ def test_arx_delay_recovers_the_dead_time(delay, direct):
     # Noise-free data of a first-order block behind `delay` samples of dead
     # time (and, for a closed-loop record, the sample of the hold): the ARX fit
     # at the true delay is exact (SSE at rounding), at any other it is not (a
-    # tap outside its lags), so
-    # `arx_delay` must return the true one and `_arx` the true coefficients.
+    # tap outside its lags), so `arx_delay` must return the true one and `_arx`
+    # the true coefficients.
     from scipy import signal
 
     from hamjax.diagnosis.nominal_fit import _arx, arx_delay

@@ -32,9 +32,6 @@ import numpy as np
 from scipy import signal
 
 
-STICTION_LIKE = ("backlash", "dead_zone", "preload", "friction")
-
-
 def _valve(st: dict, op: np.ndarray, start: str) -> np.ndarray:
     from hamjax.papers.gap import control_loops as cl
 
@@ -47,16 +44,37 @@ def _valve(st: dict, op: np.ndarray, start: str) -> np.ndarray:
     return cl.valve_positions(model, op)
 
 
-def _diagnose(seed: int, n_cases: int) -> list[tuple]:
-    """`(truth, prep, fit, named effect)` of each loop of the seed."""
+def true_process(truth: dict) -> tuple[np.ndarray, np.ndarray]:
+    """`(b, a)` of a loop's true process in discrete time, its dead time in."""
+    from hamjax.papers.gap import control_loops as cl
+
+    num, den = cl.process_tf(truth["process"], truth["physics"])
+    return cl.discrete_process(num, den, truth["dt"], truth["delay_samples"])
+
+
+def loop_cases(
+    seed: int, n_cases: int, *, sticky_only: bool = False
+) -> dict[int, dict]:
+    """`{index: case}` of the seed's loops of the benchmark
+    (`papers.gap.control_loops`, the same draws as `hamjax blind make --family
+    loops`), or of its sticky ones only."""
+    from hamjax.papers.gap import control_loops as cl
+
+    cases = {
+        i: cl.make_case(seed, i, s) for i, s in enumerate(cl.slots_for(seed, n_cases))
+    }
+    if sticky_only:
+        return {i: c for i, c in cases.items() if c["truth"]["effect"] == "backlash"}
+    return cases
+
+
+def diagnose_captured(cases: list[dict]) -> list[tuple]:
+    """`(truth, prep, fit, named effect)` of each loop, in order: diagnosed in one
+    call without model.json (hamjax fits its own nominal), the fits captured."""
     from hamjax.diagnosis import attribute as at
     from hamjax.diagnosis.diagnose import RULES, diagnose_many
     from hamjax.diagnosis.nominal_fit import fit_nominal_many
-    from hamjax.papers.gap import control_loops as cl
 
-    cases = [
-        cl.make_case(seed, i, s) for i, s in enumerate(cl.slots_for(seed, n_cases))
-    ]
     dts = [c["truth"]["dt"] for c in cases]
     plants = fit_nominal_many(
         [(dt, c["estimation"]) for dt, c in zip(dts, cases, strict=True)]
@@ -90,10 +108,8 @@ def _detectable(truth: dict, prep, fit, start: str) -> bool:
     from hamjax.diagnosis import attribute as at
     from hamjax.diagnosis.layout import finite_sse, validation_sse
     from hamjax.diagnosis.residuals import noise_floor_hf
-    from hamjax.papers.gap import control_loops as cl
 
-    process = cl.process_tf(truth["process"], truth["physics"])
-    b, a = cl.discrete_process(*process, truth["dt"], truth["delay_samples"])
+    b, a = true_process(truth)
     n = prep.n_val
     op = np.asarray(prep.arrays.v_val)[:n]
     y = np.asarray(prep.arrays.y_val)[:n]
@@ -126,13 +142,15 @@ def main(argv=None) -> None:
 
     import hamjax
     from hamjax._runtime import split_cpu_into_devices
+    from hamjax.papers.gap.blind import STICTION_LIKE
 
     split_cpu_into_devices()
     hamjax.enable_x64()
     result: dict = {"cases_per_seed": args.cases, "seeds": {}}
     pooled = {s: np.zeros(6, int) for s in args.start}
     for seed in args.seeds:
-        loops = [x for x in _diagnose(seed, args.cases) if x[0]["effect"] == "backlash"]
+        every = diagnose_captured(list(loop_cases(seed, args.cases).values()))
+        loops = [x for x in every if x[0]["effect"] == "backlash"]
         result["seeds"][str(seed)] = {}
         for start in args.start:
             det = [_detectable(t, prep, fit, start) for t, prep, fit, _ in loops]

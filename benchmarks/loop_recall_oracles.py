@@ -39,10 +39,10 @@ import threading
 from pathlib import Path
 
 import numpy as np
+from loop_recall_bound import diagnose_captured, loop_cases, true_process
 from scipy import signal
 
 
-STICTION_LIKE = ("backlash", "dead_zone", "preload", "friction")
 MODES = ("base", "grid", "start", "start_grid", "start_grid_process")
 
 
@@ -57,13 +57,6 @@ def _valve_truth(st: dict) -> tuple[float, float, float, float, str]:
         return (S + J) / 2, (S - J) / 2, S, J, "slide_jump"
     fs, fd = st["fs"], st["fd"]
     return fs, fd, fs + fd, fs - fd, "slip_jump"
-
-
-def _process(truth: dict) -> tuple[np.ndarray, np.ndarray]:
-    from hamjax.papers.gap import control_loops as cl
-
-    num, den = cl.process_tf(truth["process"], truth["physics"])
-    return cl.discrete_process(num, den, truth["dt"], truth["delay_samples"])
 
 
 def _patch(mode: str, truths: dict) -> None:
@@ -91,7 +84,7 @@ def _patch(mode: str, truths: dict) -> None:
     def with_true_process(nom, linear, dt, v, y, length, **kw):
         found = on_true_point(nom, linear, dt, v, y, length, **kw)
         truth = truths[_key(v)]
-        b, a = _process(truth)
+        b, a = true_process(truth)
         *_, S, J, slot = _valve_truth(truth["stiction"])
         b_nom, _ = layout._discrete_tf(linear, dt)
         order = layout.refit_linear_order(nom)
@@ -141,33 +134,15 @@ def _one(seed: int, n_cases: int, mode: str) -> dict:
     split_cpu_into_devices()
     hamjax.enable_x64()
     from hamjax.diagnosis import attribute as at
-    from hamjax.diagnosis.diagnose import RULES, diagnose_many
     from hamjax.diagnosis.layout import finite_sse, validation_sse
-    from hamjax.diagnosis.nominal_fit import fit_nominal_many
     from hamjax.papers.gap import control_loops as cl
+    from hamjax.papers.gap.blind import STICTION_LIKE
 
-    cases = [
-        (i, c)
-        for i, s in enumerate(cl.slots_for(seed, n_cases))
-        if (c := cl.make_case(seed, i, s))["truth"]["effect"] == "backlash"
-    ]
-    truths = {_key(c["estimation"]["v"]): c["truth"] for _, c in cases}
-    _patch(mode, truths)
-    dts = [c["truth"]["dt"] for _, c in cases]
-    plants = fit_nominal_many(
-        [(dt, c["estimation"]) for dt, (_, c) in zip(dts, cases, strict=True)]
-    )
-    pending, ratios, names = [], {}, {}
-
-    def capture(prep, fit):
-        pending.append((prep, fit))
-        return at.attribute(prep, fit)
-
-    def keep(j: int, diagnosis) -> None:
-        prep, fit = pending.pop()
-        i, case = cases[j]
-        truth = case["truth"]
-        b, a = _process(truth)
+    cases = loop_cases(seed, n_cases, sticky_only=True)
+    _patch(mode, {_key(c["estimation"]["v"]): c["truth"] for c in cases.values()})
+    ratios, names = [], []
+    for truth, prep, fit, name in diagnose_captured(list(cases.values())):
+        b, a = true_process(truth)
         rows = at.best_row_per_class(prep, finite_sse(fit), validation_sse(prep, fit))
         row = rows["backlash"]
         out = []
@@ -178,25 +153,12 @@ def _one(seed: int, n_cases: int, mode: str) -> dict:
             true = at.rms(y - signal.lfilter(b, a, x))
             fitted = at.rms(y - np.asarray(fit[f"y_{rec}"][row])[:n])
             out.append(fitted / true)
-        ratios[i], names[i] = out, diagnosis.effect
-
-    RULES["capture"] = capture
-    try:
-        diagnose_many(
-            [
-                (p, dt, c["estimation"], c["validation"])
-                for p, dt, (_, c) in zip(plants, dts, cases, strict=True)
-            ],
-            rule="capture",
-            on_result=keep,
-            fitted=[True] * len(cases),
-        )
-    finally:
-        RULES.pop("capture")
-    r = np.array([ratios[i] for i, _ in cases])
+        ratios.append(out)
+        names.append(name)
+    r = np.array(ratios)
     return {
         "sticky_loops": len(cases),
-        "named_stiction_like": sum(n in STICTION_LIKE for n in names.values()),
+        "named_stiction_like": sum(n in STICTION_LIKE for n in names),
         "backlash_over_truth_rms_median": {
             "estimation": float(np.median(r[:, 0])),
             "validation": float(np.median(r[:, 1])),
@@ -205,7 +167,7 @@ def _one(seed: int, n_cases: int, mode: str) -> dict:
             "estimation": int(np.sum(r[:, 0] <= 1.1)),
             "validation": int(np.sum(r[:, 1] <= 1.1)),
         },
-        "names": {str(i): n for i, n in names.items()},
+        "names": {str(i): n for i, n in zip(cases, names, strict=True)},
     }
 
 

@@ -320,7 +320,8 @@ def _diagnose(args, cases: list, outs, blocks, quiet, verbose) -> int:
             source = f"given ({case.folder / 'model.json'})"
         item[i] = (plant, case.dt, case.estimation, case.validation)
         name = out.name if len(outs) > 1 else case.name
-        where[i] = (case.folder, out, name, source)
+        # the nominal's source in words, and whether hamjax fitted it
+        where[i] = (case.folder, out, name, source, case.model is None)
     if not item:
         return 0
     calls = [[i for i in b if i in item] for b in blocks]
@@ -360,7 +361,7 @@ def _call(
         prior["nominal_uncertainty"] = args.nominal_uncertainty
 
     def write(j, d):  # each case as soon as it is done
-        folder, out, name, source = where[members[j]]
+        folder, out, name, source, _ = where[members[j]]
         write_diagnosis(d, out, name, nominal=source)
         if args.figures:
             from ..plotting.diagnosis import save_diagnosis_figures
@@ -371,7 +372,7 @@ def _call(
     try:
         diagnose_many(
             [item[i] for i in members],
-            fitted=[where[i][3].startswith(FITTED) for i in members],
+            fitted=[where[i][4] for i in members],
             on_result=write,
             rule=args.rule,
             padding=pad,

@@ -47,6 +47,7 @@ import jax.tree_util as jtu
 import numpy as np
 
 from .._filters import lfilter_numpy
+from ..io.model_json import integrators
 from ..models import DiscreteTransferFunction, Hammerstein, Identity, PiecewiseLinear
 from ..simulation.sharding import effective_chunk
 from .augmented import Row, slot_names
@@ -357,9 +358,8 @@ def describe_structure(plant: Hammerstein) -> str:
     the order of the block (an integrator apart), its dead time (the lag of its
     first nonzero numerator coefficient, the closed loop's sample included)."""
     b = np.asarray(plant.linear.b, float)
-    a = np.asarray(plant.linear.a, float)
-    integrating = a.shape[0] > 1 and abs(float(np.sum(a))) <= 1e-9 * np.abs(a).sum()
-    order = a.shape[0] - 1 - int(integrating)
+    n_int = integrators(plant.linear)
+    order = np.asarray(plant.linear.a).shape[0] - 1 - n_int
     nonzero = np.flatnonzero(b)
     delay = int(nonzero[0]) if nonzero.size else 0
     kind = (
@@ -367,7 +367,9 @@ def describe_structure(plant: Hammerstein) -> str:
         if isinstance(plant.nonlinearity, PiecewiseLinear)
         else "identity map"
     )
-    block = f"order {order}" + (" with an integrator" if integrating else "")
+    block = f"order {order}" + {0: "", 1: " with an integrator"}.get(
+        n_int, f" with {n_int} integrators"
+    )
     return f"{kind}, {block}, dead time {delay} sample(s)"
 
 

@@ -154,19 +154,27 @@ def load_model(source: str | os.PathLike | dict) -> tuple[Hammerstein, float | N
 MAX_INTEGRATORS = 2  # a position axis driven by a force is a double integrator
 
 
+def _integrator_poles(linear) -> tuple[np.ndarray, np.ndarray]:
+    """`(at, inside)` over the poles of `linear`: at an integrator (z = 1 for a
+    discrete block, s = 0 for a continuous one, to rounding), strictly stable."""
+    poles = np.asarray(linear.poles(), complex)
+    if isinstance(linear, ContinuousTransferFunction):
+        scale = max(float(np.max(np.abs(poles))) if poles.size else 1.0, 1.0)
+        return np.abs(poles) <= 1e-9 * scale, poles.real < 0
+    return np.abs(poles - 1.0) <= 1e-9, np.abs(poles) < 1.0
+
+
+def integrators(linear) -> int:
+    """How many poles of `linear` are integrators (`_integrator_poles`)."""
+    return int(np.sum(_integrator_poles(linear)[0]))
+
+
 def integrating_only(linear) -> bool:
     """Whether every pole of `linear` is stable except at most `MAX_INTEGRATORS`
     integrators (z = 1 for a discrete block, s = 0 for a continuous one, to
     rounding): a level loop or a position axis, which simulates from rest on a
     finite record though it is not asymptotically stable."""
-    poles = np.asarray(linear.poles(), complex)
-    if isinstance(linear, ContinuousTransferFunction):
-        scale = max(float(np.max(np.abs(poles))) if poles.size else 1.0, 1.0)
-        at = np.abs(poles) <= 1e-9 * scale
-        inside = poles.real < 0
-    else:
-        at = np.abs(poles - 1.0) <= 1e-9
-        inside = np.abs(poles) < 1.0
+    at, inside = _integrator_poles(linear)
     return bool(np.all(at | inside) and np.sum(at) <= MAX_INTEGRATORS)
 
 

@@ -142,7 +142,7 @@ def main(argv=None) -> None:
 
     import hamjax
     from hamjax._runtime import split_cpu_into_devices
-    from hamjax.papers.gap.blind import STICTION_LIKE
+    from hamjax.diagnosis.probabilities import STICTION_LIKE
 
     split_cpu_into_devices()
     hamjax.enable_x64()

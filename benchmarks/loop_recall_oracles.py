@@ -135,8 +135,8 @@ def _one(seed: int, n_cases: int, mode: str) -> dict:
     hamjax.enable_x64()
     from hamjax.diagnosis import attribute as at
     from hamjax.diagnosis.layout import finite_sse, validation_sse
+    from hamjax.diagnosis.probabilities import STICTION_LIKE
     from hamjax.papers.gap import control_loops as cl
-    from hamjax.papers.gap.blind import STICTION_LIKE
 
     cases = loop_cases(seed, n_cases, sticky_only=True)
     _patch(mode, {_key(c["estimation"]["v"]): c["truth"] for c in cases.values()})

@@ -55,6 +55,9 @@ from .residuals import autocorrelation
 
 # The contract's classes: those the diagnosis tries, and `unexplained`.
 CLASSES = ("none", *DETERMINISTIC_NAMES, *NOISE_NAMES, "unexplained")
+# Names that say "a valve sticks" on a control loop (docs/control-loops.md): the
+# contract's stiction class and the input-path effects a sticky valve resembles.
+STICTION_LIKE = ("backlash", "dead_zone", "preload", "friction")
 # Fitted on family A (module docstring): slope of the log-likelihood-ratio term,
 # then the offsets for none, parameter_mismatch, structural, noise verdicts.
 ALPHA = 0.53089511

@@ -34,7 +34,7 @@ import jax.random as jr
 import numpy as np
 
 from ...diagnosis.attribute import DETERMINISTIC_NAMES, NOISE_NAMES
-from ...diagnosis.probabilities import CLASSES as CONTRACT_CLASSES
+from ...diagnosis.probabilities import CLASSES as CONTRACT_CLASSES, STICTION_LIKE
 from ...io import model_to_dict, write_case, write_json
 from ...models import (
     ContinuousTransferFunction,
@@ -52,9 +52,6 @@ EFFECTS = ("none", *DETERMINISTIC_NAMES, *NOISE_NAMES)
 DETERMINISTIC = DETERMINISTIC_NAMES
 # The truth classes a benchmark may hold: every contract name.
 TRUTH_CLASSES = tuple(c for c in CONTRACT_CLASSES if c != "unexplained")
-# Names that say "a valve sticks" on a control loop (docs/control-loops.md): the
-# contract's stiction class and the input-path effects a sticky valve resembles.
-STICTION_LIKE = ("backlash", "dead_zone", "preload", "friction")
 # The classes drawn before the feedback effects existed, in the order of the first
 # draw (kept, so a seed still makes the same cases), and the feedback effects, which
 # replace a case's class with probability 2/14 (every class then 1/14) from a key

@@ -5,6 +5,7 @@ import time
 from pathlib import Path
 
 from ...._errors import UserInputError
+from ....diagnosis.probabilities import STICTION_LIKE
 from ....montecarlo.registry import StudyOption, option_values
 
 
@@ -20,7 +21,6 @@ SPLIT_CPU = True  # `hamjax study` exposes each core as a device first
 PUBLISHED_RMSE = {
     "cascaded_tanks": (0.191, "V", "grey box, Champneys et al. 2024"),
 }
-STICTION_LIKE = ("backlash", "dead_zone", "preload", "friction")
 
 
 # ../shared beside the clone: hamjax/papers/gap/studies/ is four folders down.

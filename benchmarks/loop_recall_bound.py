@@ -70,38 +70,22 @@ def loop_cases(
 
 def diagnose_captured(cases: list[dict]) -> list[tuple]:
     """`(truth, prep, fit, named effect)` of each loop, in order: diagnosed in one
-    call without model.json (hamjax fits its own nominal), the fits captured."""
-    from hamjax.diagnosis import attribute as at
-    from hamjax.diagnosis.diagnose import RULES, diagnose_many
+    call without model.json (hamjax fits its own nominal), the fits captured
+    (`decision_replay.capture`)."""
+    from decision_replay import capture
+
     from hamjax.diagnosis.nominal_fit import fit_nominal_many
 
     dts = [c["truth"]["dt"] for c in cases]
     plants = fit_nominal_many(
         [(dt, c["estimation"]) for dt, c in zip(dts, cases, strict=True)]
     )
-    pending, fits = [], {}
-
-    def capture(prep, fit):
-        pending.append((prep, fit))
-        return at.attribute(prep, fit)
-
-    def keep(i, diagnosis):
-        fits[i] = (*pending.pop(), diagnosis.effect)
-
-    RULES["capture"] = capture
-    try:
-        diagnose_many(
-            [
-                (p, dt, c["estimation"], c["validation"])
-                for p, dt, c in zip(plants, dts, cases, strict=True)
-            ],
-            rule="capture",
-            on_result=keep,
-            fitted=[True] * len(cases),
-        )
-    finally:
-        RULES.pop("capture")
-    return [(c["truth"], *fits[i]) for i, c in enumerate(cases)]
+    items = [
+        (p, dt, c["estimation"], c["validation"])
+        for p, dt, c in zip(plants, dts, cases, strict=True)
+    ]
+    kept = capture(items, [True] * len(cases))
+    return [(c["truth"], *k) for c, k in zip(cases, kept, strict=True)]
 
 
 def _detectable(truth: dict, prep, fit, start: str) -> bool:

@@ -1,5 +1,9 @@
 """Shared test helpers."""
 
+import importlib.util
+import sys
+from pathlib import Path
+
 import jax.tree_util as jtu
 import numpy as np
 from scipy import signal
@@ -210,3 +214,17 @@ def pi_loop(i: int, n: int = 2000):
         v[k] = v_prev + 0.8 * (e - e_prev) + 0.3 * e
         v_prev, e_prev = v[k], e
     return y + d, v
+
+
+BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
+
+
+def benchmark_module(name: str, *, register: bool = False):
+    """The script `benchmarks/<name>.py` imported as a module; `register`: put it
+    in `sys.modules` under `name` (a process pool pickles its functions by it)."""
+    spec = importlib.util.spec_from_file_location(name, BENCHMARKS / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    if register:
+        sys.modules[name] = module
+    spec.loader.exec_module(module)
+    return module

@@ -1,17 +1,10 @@
 """benchmarks/compare_revisions.py: two trees' JSON compared number by number."""
 
-import importlib.util
-from pathlib import Path
-
-
-SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "compare_revisions.py"
+from helpers import benchmark_module
 
 
 def _module():
-    spec = importlib.util.spec_from_file_location("compare_revisions", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return benchmark_module("compare_revisions")
 
 
 def test_numbers_within_tolerance_are_equal_and_timings_are_ignored():

@@ -10,6 +10,7 @@ import pytest
 import scipy.signal as ss
 from scipy.signal import lfilter
 
+from hamjax.diagnosis.augmented import n_max_of, slot_names
 from hamjax.diagnosis.diagnose import diagnose_many
 from hamjax.diagnosis.effects import StartContext
 from hamjax.diagnosis.effects.extra_pole import (
@@ -18,6 +19,7 @@ from hamjax.diagnosis.effects.extra_pole import (
     lag_pole,
 )
 from hamjax.diagnosis.effects.time_delay import dominant_time_constant
+from hamjax.diagnosis.layout import prepare
 from hamjax.models import DiscreteTransferFunction, Hammerstein, Identity
 from hamjax.papers.gap.demo_cases import staircase
 
@@ -137,3 +139,23 @@ def test_a_sensor_lag_on_a_continuous_plant_is_named_in_its_continuous_form():
     fitted = exact.ranking[0]["params"]["lag_pole"]
     assert abs(fitted["value"] - p) < 4 * fitted["std"] + 1e-6, (p, fitted)
     assert exact.gap_after < 1.1e-4
+
+
+@pytest.mark.parametrize("fitted", [False, True])
+def test_no_row_frees_both_forms_of_the_lag(fitted):
+    # `lag_factor` is exact only where at most one of `pole` and `lag_pole` is
+    # away from its neutral 0: every candidate row of a case, given or fitted
+    # nominal (the starts that re-fit the linear block included), frees one of
+    # them at most, and the extra pole's own rows free exactly one
+    recs = []
+    for i in range(2):
+        v = staircase(jr.key(80 + i), 600, hold=20)
+        y = lfilter([0.0, 1 - A], [1.0, -A], v)
+        recs.append({"t": np.arange(600) * DT, "v": v, "y": y})
+    prep = prepare(PLANT, DT, *recs, fitted_nominal=fitted)
+    names = slot_names(n_max_of(prep.arrays.anchor.shape[0]))
+    cols = [names.index("pole"), names.index("lag_pole")]
+    freed = [(name, int(np.sum(np.asarray(row.free)[cols]))) for name, row in prep.rows]
+    assert max(k for _, k in freed) <= 1, freed
+    own = [k for name, k in freed if name == "extra_pole"]
+    assert own and all(k == 1 for k in own), freed

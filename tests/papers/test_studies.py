@@ -7,19 +7,16 @@ registered studies through the command line, and the compile-options benchmark
 through its script in `benchmarks/`.
 """
 
-import importlib.util
 import json
 import pkgutil
-from pathlib import Path
 
 import pytest
+from helpers import benchmark_module
 
 from hamjax.cli.main import main as hamjax_main
 from hamjax.montecarlo.registry import discover_studies
 from hamjax.papers import STUDY_PACKAGES
 
-
-BENCHMARKS_DIR = Path(__file__).resolve().parents[2] / "benchmarks"
 
 TINY = {
     "nbbi-rate": (["--ns", "3,6,12"], "nbbi_rate.json"),
@@ -30,11 +27,7 @@ TINY = {
 
 
 def _load(script: str):
-    path = BENCHMARKS_DIR / f"{script}.py"
-    spec = importlib.util.spec_from_file_location(script, path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return benchmark_module(script)
 
 
 @pytest.mark.slow

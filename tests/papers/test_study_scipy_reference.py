@@ -5,32 +5,23 @@ names the effect on noise-free cases built here with plain NumPy/SciPy, and the
 study runs end to end on a tiny `hamjax blind make` set.
 """
 
-import importlib.util
 import json
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import reference_backlash, reference_zoh
+from helpers import benchmark_module, reference_backlash, reference_zoh
 from scipy import signal
 
 from hamjax.cli.main import main as hamjax_main
 
 
-SCRIPT = (
-    Path(__file__).resolve().parents[2] / "benchmarks" / "scipy_reference_diagnosis.py"
-)
-
-
 @pytest.fixture(scope="module")
 def ref():
-    spec = importlib.util.spec_from_file_location("scipy_reference_diagnosis", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # the process pool pickles its functions by name
-    spec.loader.exec_module(module)
+    # the process pool pickles its functions by name
+    module = benchmark_module("scipy_reference_diagnosis", register=True)
     yield module
-    sys.modules.pop(spec.name, None)
+    sys.modules.pop("scipy_reference_diagnosis", None)
 
 
 DT = 0.05

@@ -1,0 +1,169 @@
+"""A change of the decision rule measured on the same fits, in seconds: capture a
+set's fits once, then replay the rule of whichever hamjax is first on the path.
+
+    python benchmarks/decision_replay.py capture --set SETS/B9 --out fits/B9.pkl
+    python benchmarks/decision_replay.py capture --loops 4 --out fits/L4.pkl
+    python benchmarks/decision_replay.py score fits/*.pkl --names before.json
+    PYTHONPATH=/path/to/worktree python benchmarks/decision_replay.py \\
+        score fits/*.pkl --against before.json
+
+`capture` diagnoses a blind set (`hamjax blind make`: `truth.json`, `cases/`;
+a case without model.json gets hamjax's own nominal, as in `hamjax diagnose`)
+or the seed's control loops (`--loops SEED`: the cases of `hamjax blind make
+--family loops --seed SEED`, without model.json) in one `diagnose_many` call,
+and pickles per case its truth, its prepared rows and fits (the
+`layout.Prepared` and the fit dict that the rule reads) and the name given.
+`score` applies the installed hamjax's rule (`--rule`, `diagnose.RULES`) to
+those fits and prints per file the accuracy, the false alarms on `none`, and
+on control loops the stiction recall and false-alarm rate (names in
+`probabilities.STICTION_LIKE`); `--names` writes every case's name,
+`--against` reads such a file and lists the cases whose name changed.
+
+What it can replay: the fits depend only on the fitting code, so a change to
+`attribute` or `decide` is measured on the fits captured before it. A change
+to the fits, to the candidate rows, or to what the schedule decides while
+fitting (which rows are re-fitted by prediction error follows
+`attribute.whitening_predictor`; the noise candidates are stored with the
+fits) needs a new capture. The pickles hold hamjax's internal objects: replay
+them with a tree whose `Prepared` and `Row` are those that captured them.
+
+A capture takes as long as the diagnosis (3-5 minutes for 240 cases on 2
+cores), a replay of one set a few seconds. No timing is reported.
+"""
+
+import argparse
+import json
+import pickle
+import sys
+from pathlib import Path
+
+
+def capture(items: list, fitted: list[bool]) -> list[tuple]:
+    """`(prep, fit, named effect)` of each of `diagnose_many`'s `items`, in
+    order: one call, the rule's inputs kept as it is applied."""
+    from hamjax.diagnosis import attribute as at
+    from hamjax.diagnosis.diagnose import RULES, diagnose_many
+
+    pending, kept = [], {}
+
+    def keep_inputs(prep, fit):
+        pending.append((prep, fit))
+        return at.attribute(prep, fit)
+
+    def keep(i, diagnosis):  # called right after the rule, case by case
+        kept[i] = (*pending.pop(), diagnosis.effect)
+
+    RULES["capture"] = keep_inputs
+    try:
+        diagnose_many(items, rule="capture", on_result=keep, fitted=fitted)
+    finally:
+        RULES.pop("capture")
+    return [kept[i] for i in range(len(items))]
+
+
+def _set_items(folder: Path) -> tuple[list, list, list, list]:
+    from hamjax.diagnosis.case import read_case
+    from hamjax.diagnosis.nominal_fit import fit_nominal_many
+
+    truth = json.loads((folder / "truth.json").read_text())["cases"]
+    folders = sorted(p for p in (folder / "cases").iterdir() if p.is_dir())
+    cases = [read_case(f) for f in folders]
+    own = [i for i, c in enumerate(cases) if c.model is None]
+    plants = fit_nominal_many([(cases[i].dt, cases[i].estimation) for i in own])
+    fitted_plant = dict(zip(own, plants, strict=True))
+    items = [
+        (c.model or fitted_plant[i], c.dt, c.estimation, c.validation)
+        for i, c in enumerate(cases)
+    ]
+    names = [f.name for f in folders]
+    return names, [truth[n] for n in names], items, [c.model is None for c in cases]
+
+
+def _loop_items(seed: int, n_cases: int) -> tuple[list, list]:
+    """Names and `(truth, prep, fit, named)` of the seed's loops, captured
+    (`loop_recall_bound.diagnose_captured`)."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from loop_recall_bound import diagnose_captured, loop_cases
+
+    cases = loop_cases(seed, n_cases)
+    order = sorted(cases)
+    kept = diagnose_captured([cases[i] for i in order])
+    return [f"case_{i:04d}" for i in order], kept
+
+
+def _score(path: Path, rule: str) -> tuple[dict, str]:
+    from hamjax.diagnosis.diagnose import RULES
+    from hamjax.diagnosis.probabilities import STICTION_LIKE
+
+    data = pickle.loads(path.read_bytes())
+    named = {n: RULES[rule](prep, fit).effect for n, (_, prep, fit, _) in data.items()}
+    truth = {n: entry[0]["effect"] for n, entry in data.items()}
+    right = sum(named[n] == truth[n] for n in named)
+    nones = [n for n in named if truth[n] == "none"]
+    line = (
+        f"{path.name}: accuracy {right / len(named):.3f} ({right} of {len(named)}), "
+        f"false alarm on none {sum(named[n] != 'none' for n in nones)} of {len(nones)}"
+    )
+    if all("stiction" in entry[0] for entry in data.values()):  # control loops
+        sticky = [n for n in named if truth[n] == "backlash"]
+        other = [n for n in named if truth[n] != "backlash"]
+        hits = sum(named[n] in STICTION_LIKE for n in sticky)
+        alarms = sum(named[n] in STICTION_LIKE for n in other)
+        line += (
+            f"; stiction recall {hits} of {len(sticky)}, false alarm {alarms} of "
+            f"{len(other)}"
+        )
+    return named, line
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+    cap = sub.add_parser("capture", help="diagnose once, keep the rule's inputs")
+    what = cap.add_mutually_exclusive_group(required=True)
+    what.add_argument("--set", type=Path, help="a blind set (truth.json, cases/)")
+    what.add_argument("--loops", type=int, metavar="SEED", help="control loops")
+    cap.add_argument("--cases", type=int, default=80, help="loops per seed")
+    cap.add_argument("--out", type=Path, required=True)
+    score = sub.add_parser("score", help="replay the installed rule")
+    score.add_argument("fits", type=Path, nargs="+")
+    score.add_argument("--rule", default="cascade")
+    score.add_argument("--names", type=Path, help="write every case's name here")
+    score.add_argument("--against", type=Path, help="names written earlier")
+    args = parser.parse_args(argv)
+
+    import hamjax
+    from hamjax._runtime import split_cpu_into_devices
+
+    split_cpu_into_devices()
+    hamjax.enable_x64()
+    if args.command == "capture":
+        if args.out.exists():
+            parser.error(f"{args.out} exists: not overwritten")
+        if args.set is not None:
+            names, truths, items, fitted = _set_items(args.set)
+            captured = capture(items, fitted)
+            kept = [(t, *k) for t, k in zip(truths, captured, strict=True)]
+        else:
+            names, kept = _loop_items(args.loops, args.cases)
+        store = dict(zip(names, kept, strict=True))
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.write_bytes(pickle.dumps(store))
+        print(f"{args.out}: {len(store)} cases captured")
+        return
+    before = json.loads(args.against.read_text()) if args.against else {}
+    every = {}
+    for path in args.fits:
+        named, line = _score(path, args.rule)
+        every[path.name] = named
+        print(line)
+        for n, effect in named.items():
+            old = before.get(path.name, {}).get(n)
+            if old is not None and old != effect:
+                print(f"    {n}: {old} -> {effect}")
+    if args.names:
+        args.names.write_text(json.dumps(every, indent=1))
+
+
+if __name__ == "__main__":
+    main()

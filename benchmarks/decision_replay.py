@@ -62,6 +62,8 @@ def capture(items: list, fitted: list[bool]) -> list[tuple]:
 
 
 def _set_items(folder: Path) -> tuple[list, list, list, list]:
+    """Names, truths, `diagnose_many` items and fitted flags of a blind set's
+    cases (hamjax's own nominal for a case without model.json)."""
     from hamjax.diagnosis.case import read_case
     from hamjax.diagnosis.nominal_fit import fit_nominal_many
 
@@ -137,6 +139,10 @@ def main(argv=None) -> None:
 
     split_cpu_into_devices()
     hamjax.enable_x64()
+    from hamjax.diagnosis.diagnose import RULES
+
+    if args.command == "score" and args.rule not in RULES:
+        parser.error(f"--rule {args.rule}: one of {', '.join(sorted(RULES))}")
     if args.command == "capture":
         if args.out.exists():
             parser.error(f"{args.out} exists: not overwritten")

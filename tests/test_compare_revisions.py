@@ -3,12 +3,8 @@
 from helpers import benchmark_module
 
 
-def _module():
-    return benchmark_module("compare_revisions")
-
-
 def test_numbers_within_tolerance_are_equal_and_timings_are_ignored():
-    cmp = _module()
+    cmp = benchmark_module("compare_revisions")
     old = {"a": [1.0, 2.0], "b": {"c": 3.0, "seconds_per_case": 1.0}, "n": 4}
     new = {
         "a": [1.0, 2.0 * (1 + 1e-12)],
@@ -19,7 +15,7 @@ def test_numbers_within_tolerance_are_equal_and_timings_are_ignored():
 
 
 def test_a_changed_number_a_missing_key_and_nan_are_reported():
-    cmp = _module()
+    cmp = benchmark_module("compare_revisions")
     old = {"a": [1.0, 2.0], "x": 1.0, "nan": float("nan"), "flag": True}
     new = {"a": [1.0, 2.1], "nan": float("nan"), "flag": False}
     diffs = cmp._differences(old, new, 1e-9)

@@ -26,10 +26,6 @@ TINY = {
 }
 
 
-def _load(script: str):
-    return benchmark_module(script)
-
-
 @pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(TINY))
 def test_study_runs_tiny(name, tmp_path, mplcleanup):
@@ -86,7 +82,7 @@ def test_compile_options_study_times_each_configuration(tmp_path):
     case = next((tmp_path / "set" / "cases").iterdir())
     out = tmp_path / "out"
     argv = ["--single", str(case), "--repeats", "1", "--out", str(out)]
-    assert _load("diagnosis_compile_options").main(argv) == 0
+    assert benchmark_module("diagnosis_compile_options").main(argv) == 0
     summary = json.loads((out / "compile_options.json").read_text())["one_case"]
     assert set(summary) == {"cases", "xla-defaults", "hamjax", "hamjax+opt0"}
     for config in ("xla-defaults", "hamjax", "hamjax+opt0"):

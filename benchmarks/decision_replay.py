@@ -34,7 +34,6 @@ cores), a replay of one set a few seconds. No timing is reported.
 import argparse
 import json
 import pickle
-import sys
 from pathlib import Path
 
 
@@ -61,6 +60,40 @@ def capture(items: list, fitted: list[bool]) -> list[tuple]:
     return [kept[i] for i in range(len(items))]
 
 
+def loop_cases(
+    seed: int, n_cases: int, *, sticky_only: bool = False
+) -> dict[int, dict]:
+    """`{index: case}` of the seed's loops of the benchmark
+    (`papers.gap.control_loops`, the same draws as `hamjax blind make --family
+    loops`), or of its sticky ones only."""
+    from hamjax.papers.gap import control_loops as cl
+
+    cases = {
+        i: cl.make_case(seed, i, s) for i, s in enumerate(cl.slots_for(seed, n_cases))
+    }
+    if sticky_only:
+        return {i: c for i, c in cases.items() if c["truth"]["effect"] == "backlash"}
+    return cases
+
+
+def diagnose_captured(cases: list[dict]) -> list[tuple]:
+    """`(truth, prep, fit, named effect)` of each loop, in order: diagnosed in one
+    call without model.json (hamjax fits its own nominal), the fits captured
+    (`capture`)."""
+    from hamjax.diagnosis.nominal_fit import fit_nominal_many
+
+    dts = [c["truth"]["dt"] for c in cases]
+    plants = fit_nominal_many(
+        [(dt, c["estimation"]) for dt, c in zip(dts, cases, strict=True)]
+    )
+    items = [
+        (p, dt, c["estimation"], c["validation"])
+        for p, dt, c in zip(plants, dts, cases, strict=True)
+    ]
+    kept = capture(items, [True] * len(cases))
+    return [(c["truth"], *k) for c, k in zip(cases, kept, strict=True)]
+
+
 def _set_items(folder: Path) -> tuple[list, list, list, list]:
     """Names, truths, `diagnose_many` items and fitted flags of a blind set's
     cases (hamjax's own nominal for a case without model.json)."""
@@ -83,10 +116,7 @@ def _set_items(folder: Path) -> tuple[list, list, list, list]:
 
 def _loop_items(seed: int, n_cases: int) -> tuple[list, list]:
     """Names and `(truth, prep, fit, named)` of the seed's loops, captured
-    (`loop_recall_bound.diagnose_captured`)."""
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
-    from loop_recall_bound import diagnose_captured, loop_cases
-
+    (`diagnose_captured`)."""
     cases = loop_cases(seed, n_cases)
     order = sorted(cases)
     kept = diagnose_captured([cases[i] for i in order])

@@ -29,6 +29,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+from decision_replay import diagnose_captured, loop_cases
 from scipy import signal
 
 
@@ -52,42 +53,6 @@ def true_process(truth: dict) -> tuple[np.ndarray, np.ndarray]:
     return cl.discrete_process(num, den, truth["dt"], truth["delay_samples"])
 
 
-def loop_cases(
-    seed: int, n_cases: int, *, sticky_only: bool = False
-) -> dict[int, dict]:
-    """`{index: case}` of the seed's loops of the benchmark
-    (`papers.gap.control_loops`, the same draws as `hamjax blind make --family
-    loops`), or of its sticky ones only."""
-    from hamjax.papers.gap import control_loops as cl
-
-    cases = {
-        i: cl.make_case(seed, i, s) for i, s in enumerate(cl.slots_for(seed, n_cases))
-    }
-    if sticky_only:
-        return {i: c for i, c in cases.items() if c["truth"]["effect"] == "backlash"}
-    return cases
-
-
-def diagnose_captured(cases: list[dict]) -> list[tuple]:
-    """`(truth, prep, fit, named effect)` of each loop, in order: diagnosed in one
-    call without model.json (hamjax fits its own nominal), the fits captured
-    (`decision_replay.capture`)."""
-    from decision_replay import capture
-
-    from hamjax.diagnosis.nominal_fit import fit_nominal_many
-
-    dts = [c["truth"]["dt"] for c in cases]
-    plants = fit_nominal_many(
-        [(dt, c["estimation"]) for dt, c in zip(dts, cases, strict=True)]
-    )
-    items = [
-        (p, dt, c["estimation"], c["validation"])
-        for p, dt, c in zip(plants, dts, cases, strict=True)
-    ]
-    kept = capture(items, [True] * len(cases))
-    return [(c["truth"], *k) for c, k in zip(cases, kept, strict=True)]
-
-
 def _detectable(truth: dict, prep, fit, start: str) -> bool:
     from hamjax.diagnosis import attribute as at
     from hamjax.diagnosis.layout import finite_sse, validation_sse
@@ -105,7 +70,7 @@ def _detectable(truth: dict, prep, fit, start: str) -> bool:
     noise, significant, _ = at.nominal_noise(fit["noise"], at.reference(prep, fit)[2])
     if not significant:
         return in_simulation
-    e_pm, e_true = at._predicted(noise, r_pm), at._predicted(noise, r_true)
+    e_pm, e_true = at.one_step_errors(noise, r_pm), at.one_step_errors(noise, r_true)
     if e_pm is None or e_true is None:
         return False
     return in_simulation and at.improvement_z(e_pm, e_true) > at.Z_STAR

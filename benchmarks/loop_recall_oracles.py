@@ -39,7 +39,8 @@ import threading
 from pathlib import Path
 
 import numpy as np
-from loop_recall_bound import diagnose_captured, loop_cases, true_process
+from decision_replay import diagnose_captured, loop_cases
+from loop_recall_bound import true_process
 from scipy import signal
 
 

@@ -4,6 +4,7 @@ import argparse
 import sys
 import time
 from pathlib import Path
+from typing import NamedTuple
 
 from .._argtypes import positive_float
 from ._common import add_cluster_arguments, start_cluster
@@ -290,6 +291,18 @@ def run(args: argparse.Namespace) -> int:
 FITTED = "fitted by hamjax on the estimation record (nominal_model.json)"
 
 
+class _Where(NamedTuple):
+    """Where a case comes from and goes: its folder, its output folder, the name
+    it is written under, its nominal's source in words, and whether hamjax fitted
+    that nominal."""
+
+    folder: Path
+    out: Path
+    name: str
+    source: str
+    fitted: bool
+
+
 def _diagnose(args, cases: list, outs, blocks, quiet, verbose) -> int:
     """Diagnose the cases read (`(index, case, out)`), one `diagnose_many` call per
     block of `blocks` (`share`) padded as the whole run (`padding`), writing each
@@ -320,8 +333,7 @@ def _diagnose(args, cases: list, outs, blocks, quiet, verbose) -> int:
             source = f"given ({case.folder / 'model.json'})"
         item[i] = (plant, case.dt, case.estimation, case.validation)
         name = out.name if len(outs) > 1 else case.name
-        # the nominal's source in words, and whether hamjax fitted it
-        where[i] = (case.folder, out, name, source, case.model is None)
+        where[i] = _Where(case.folder, out, name, source, case.model is None)
     if not item:
         return 0
     calls = [[i for i in b if i in item] for b in blocks]
@@ -347,7 +359,7 @@ def _diagnose(args, cases: list, outs, blocks, quiet, verbose) -> int:
 
 
 def _call(
-    args, members: list[int], item: dict, where: dict, pad, show, verbose
+    args, members: list[int], item: dict, where: dict[int, _Where], pad, show, verbose
 ) -> None:
     """One block: `diagnose_many` of the cases `members` (in block order) with the
     run's padding `pad`; each case written as soon as it is done and its line
@@ -361,25 +373,25 @@ def _call(
         prior["nominal_uncertainty"] = args.nominal_uncertainty
 
     def write(j, d):  # each case as soon as it is done
-        folder, out, name, source, _ = where[members[j]]
-        write_diagnosis(d, out, name, nominal=source)
+        w = where[members[j]]
+        write_diagnosis(d, w.out, w.name, nominal=w.source)
         if args.figures:
             from ..plotting.diagnosis import save_diagnosis_figures
 
-            save_diagnosis_figures(d, out, name)
-        show(members[j], _line(name, d, verbose))
+            save_diagnosis_figures(d, w.out, w.name)
+        show(members[j], _line(w.name, d, verbose))
 
     try:
         diagnose_many(
             [item[i] for i in members],
-            fitted=[where[i][4] for i in members],
+            fitted=[where[i].fitted for i in members],
             on_result=write,
             rule=args.rule,
             padding=pad,
             **prior,
         )
     except DiagnosisNotFinite as err:
-        raise UserInputError(f"{where[members[err.index]][0]}: {err}") from None
+        raise UserInputError(f"{where[members[err.index]].folder}: {err}") from None
     except ValueError as err:
         raise UserInputError(
             f"{args.cases[0] if len(args.cases) == 1 else 'cases'}: {err}"

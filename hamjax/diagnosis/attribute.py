@@ -501,14 +501,17 @@ def _lr_through_noise(
     if n_beyond(prep, best.row, pm.row) == 0:  # nested in the re-fit
         return None
     if z is None:
-        e_pm, e_best = _predicted(noise, pm.residual), _predicted(noise, best.residual)
+        e_pm, e_best = (
+            one_step_errors(noise, pm.residual),
+            one_step_errors(noise, best.residual),
+        )
         if e_pm is None or e_best is None:
             return None
         z = improvement_z(e_pm, e_best)
     return _nested_lr(prep, finite_sse(white), pm, best, m, z=z)
 
 
-def _predicted(noise_c: Candidate, r: np.ndarray) -> np.ndarray | None:
+def one_step_errors(noise_c: Candidate, r: np.ndarray) -> np.ndarray | None:
     """The residual `r` through `noise_c`'s one-step predictor (its errors), or
     None when `r` is not finite (a failed fit)."""
     if not np.all(np.isfinite(r)):
@@ -526,7 +529,7 @@ def _over_noise(noise_c: Candidate, r_val: np.ndarray, sig) -> dict:
     `nominal_gap_with_noise` holds that reference's gap): one-step-ahead errors
     on validation, the batch-means test at $z^\\star$ (module docstring,
     *Derivation of the veto*)."""
-    err = _predicted(noise_c, r_val)
+    err = one_step_errors(noise_c, r_val)
     if err is None:
         return {"z": -np.inf, "significant": False, "noise": noise_c.effect}
     (param,) = noise_c.params.values()
@@ -563,7 +566,7 @@ def _gap_through_noise(
     model)."""
 
     def white(c: Candidate) -> np.ndarray:
-        err = _predicted(noise_c, c.residual)
+        err = one_step_errors(noise_c, c.residual)
         return np.full_like(c.residual, np.inf) if err is None else err
 
     errs = {c.effect: white(c) for c in det}
@@ -774,7 +777,7 @@ def attribute(prep: Prepared, fit: dict) -> Attribution:
     def through(noise_c: Candidate) -> Candidate:
         # the reference seen through the noise predictor: the nominal's (the noise
         # candidate itself), or the re-fit's prediction-error fit through it
-        err = _predicted(noise_c, cands_pe["parameter_mismatch"].residual)
+        err = one_step_errors(noise_c, cands_pe["parameter_mismatch"].residual)
         if not refit_ref or err is None:
             return noise_c
         return Candidate(

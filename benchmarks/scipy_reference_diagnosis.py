@@ -322,7 +322,10 @@ def fit(plant, v, y, effect, theta0, p_starts, p_lo, p_hi, fixed=()):
     big = np.full(len(y), 1e3 * (np.std(y) + 1.0))
 
     def residual(x):
-        ys = plant.simulate(x[:n_th], v, effect, np.concatenate([x[n_th:], fixed]))
+        try:  # a trial point the simulator cannot take is a bad point, not a crash
+            ys = plant.simulate(x[:n_th], v, effect, np.concatenate([x[n_th:], fixed]))
+        except (np.linalg.LinAlgError, ValueError):
+            ys = None
         if ys is None or not np.all(np.isfinite(ys)):
             return big
         return ys - y

@@ -103,6 +103,29 @@ def test_memory_operators_match_independent_references(ref):
     assert limited[0] == v[0]
 
 
+def test_a_trial_point_the_simulator_cannot_take_is_a_bad_point(ref):
+    # a continuous block at NaN parameters makes the matrix exponential raise; the
+    # fit treats that point as it treats an unstable one (a large residual) and
+    # ends at the start, instead of stopping the whole study (seen on family B)
+    plant = ref.Plant(MODELS["continuous_identity"], DT)
+    v = staircase(4)
+    y = plant.simulate(plant.theta0, v)
+    with pytest.raises((np.linalg.LinAlgError, ValueError)):
+        plant.simulate(np.full_like(plant.theta0, np.nan), v)
+
+    class Failing:  # the plant, failing away from its start
+        lower, upper = plant.lower, plant.upper
+
+        def simulate(self, theta, v, effect="none", p=()):
+            if not np.array_equal(theta, plant.theta0):
+                raise np.linalg.LinAlgError("Array must not contain infs or NaNs")
+            return plant.simulate(theta, v, effect, p)
+
+    theta, _, sse = ref.fit(Failing(), v, y + 0.01, "none", plant.theta0, [[]], [], [])
+    np.testing.assert_array_equal(theta, plant.theta0)
+    assert sse == pytest.approx(0.01**2 * len(v))
+
+
 def _simulate_truth(effect, v):
     """Noise-free plant output with the effect applied, written independently."""
     if effect == "saturation":

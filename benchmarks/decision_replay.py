@@ -60,6 +60,22 @@ def capture(items: list, fitted: list[bool]) -> list[tuple]:
     return [kept[i] for i in range(len(items))]
 
 
+def _with_own_nominal(cases: list[tuple]) -> tuple[list, list[bool]]:
+    """`diagnose_many`'s items of `(model or None, dt, estimation, validation)`
+    cases, hamjax's own nominal (`fit_nominal_many`, one batch, as `hamjax
+    diagnose` fits it) where the model is None, and which ones it fitted."""
+    from hamjax.diagnosis.nominal_fit import fit_nominal_many
+
+    own = [i for i, (model, *_) in enumerate(cases) if model is None]
+    plants = fit_nominal_many([(cases[i][1], cases[i][2]) for i in own])
+    fitted_plant = dict(zip(own, plants, strict=True))
+    items = [
+        (fitted_plant[i] if model is None else model, dt, est, val)
+        for i, (model, dt, est, val) in enumerate(cases)
+    ]
+    return items, [model is None for model, *_ in cases]
+
+
 def loop_cases(
     seed: int, n_cases: int, *, sticky_only: bool = False
 ) -> dict[int, dict]:
@@ -80,17 +96,10 @@ def diagnose_captured(cases: list[dict]) -> list[tuple]:
     """`(truth, prep, fit, named effect)` of each loop, in order: diagnosed in one
     call without model.json (hamjax fits its own nominal), the fits captured
     (`capture`)."""
-    from hamjax.diagnosis.nominal_fit import fit_nominal_many
-
-    dts = [c["truth"]["dt"] for c in cases]
-    plants = fit_nominal_many(
-        [(dt, c["estimation"]) for dt, c in zip(dts, cases, strict=True)]
+    items, fitted = _with_own_nominal(
+        [(None, c["truth"]["dt"], c["estimation"], c["validation"]) for c in cases]
     )
-    items = [
-        (p, dt, c["estimation"], c["validation"])
-        for p, dt, c in zip(plants, dts, cases, strict=True)
-    ]
-    kept = capture(items, [True] * len(cases))
+    kept = capture(items, fitted)
     return [(c["truth"], *k) for c, k in zip(cases, kept, strict=True)]
 
 
@@ -98,20 +107,15 @@ def _set_items(folder: Path) -> tuple[list, list, list, list]:
     """Names, truths, `diagnose_many` items and fitted flags of a blind set's
     cases (hamjax's own nominal for a case without model.json)."""
     from hamjax.diagnosis.case import read_case
-    from hamjax.diagnosis.nominal_fit import fit_nominal_many
 
     truth = json.loads((folder / "truth.json").read_text())["cases"]
     folders = sorted(p for p in (folder / "cases").iterdir() if p.is_dir())
     cases = [read_case(f) for f in folders]
-    own = [i for i, c in enumerate(cases) if c.model is None]
-    plants = fit_nominal_many([(cases[i].dt, cases[i].estimation) for i in own])
-    fitted_plant = dict(zip(own, plants, strict=True))
-    items = [
-        (c.model or fitted_plant[i], c.dt, c.estimation, c.validation)
-        for i, c in enumerate(cases)
-    ]
+    items, fitted = _with_own_nominal(
+        [(c.model, c.dt, c.estimation, c.validation) for c in cases]
+    )
     names = [f.name for f in folders]
-    return names, [truth[n] for n in names], items, [c.model is None for c in cases]
+    return names, [truth[n] for n in names], items, fitted
 
 
 def _loop_items(seed: int, n_cases: int) -> tuple[list, list]:

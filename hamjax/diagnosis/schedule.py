@@ -19,15 +19,25 @@ one compilation per record length serves a whole call:
 Most rows converge within a pass or two, and a batch costs as much as its
 slowest row: queueing the slow ones together, instead of letting each batch run
 all its rows to the longest budget in it (a re-fit of the whole linear block has
-`NOMINAL_STEPS`), is what the split buys. Full batches of the later stages run
-first, so cases complete (and are reported) early; once screening is over, what
-is left runs in padded batches, pass after pass. On the 80 control loops of
+`NOMINAL_STEPS`), is what the split buys. On the 80 control loops of
 `hamjax blind make --family loops --seed 1` (2 cores) the passes after the
 continuation's first took the queue from 116 s to 82 s, every diagnosis the same.
+
+After screening the items wait in one queue per *need*: whether their row needs
+the input-memory scan (rate limit, backlash) and whether it needs the feedback
+loop (friction, feedback nonlinearity). Each device's share of a batch decides
+at run time whether to run them (`fit._fit_flat`), so a share of one need runs
+at that need's cost and not at the cost of every need at once (`_compose`).
+A batch of the later stages runs as soon as one need fills it, so cases complete
+(and are reported) early; once screening is over, what is left runs in padded
+batches, pass after pass. On family B seed 9 (240 cases, 2 cores, one call,
+compiled programs from the cache; old and new alternating twice) the per-need
+shares took `hamjax diagnose` from 146 and 142 s to 113 and 113 s, every name
+the same.
 """
 
-from collections import deque
-from collections.abc import Callable
+from collections import defaultdict, deque
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
 import equinox as eqx
@@ -245,9 +255,12 @@ def run_queue(
     `RowFit` fields (NumPy, leading axis row) plus `theta_std`. `while_compiling`:
     as in `fit.fit_batch`. Batches are `batch` rows wide; in a call of at least
     `TAIL_BATCHES` screening batches, one of at most a `TAIL_FRACTION` of that
-    many rows is padded to that narrower width only."""
-    stages = ("screen", "finish", "more", "whiten")
-    queues: dict[str, deque] = {s: deque() for s in stages}
+    many rows is padded to that narrower width only. After screening each
+    device's share of a batch holds rows of one need (`_compose`)."""
+    screen: deque = deque()
+    # after screening, one queue per need (`need`): finishing rows, their
+    # continuations and prediction-error fits alike
+    later: dict[tuple, deque] = defaultdict(deque)
     fits: list[dict | None] = [None] * len(preps)
     outstanding = [len(p.rows) for p in preps]
     arrays = jtu.tree_map(lambda *x: np.stack(x), *[p.arrays for p in preps])
@@ -267,10 +280,20 @@ def run_queue(
         ((c, k) for c, m in enumerate(memory) for k in range(m.shape[0])),
         key=lambda ck: (not memory[ck[0]][ck[1]], bool(feedback[ck[0]][ck[1]])),
     )
-    queues["screen"].extend(
+    screen.extend(
         Item(c, k, rows[c].theta0[k], LAMBDA0, SCREEN_STEPS, "screen", "always")
         for c, k in order
     )
+
+    def need(item: Item) -> tuple[bool, bool]:
+        # what the item's batch must run (`fit._fit_flat`): the input-memory
+        # scan, the feedback loop
+        return bool(memory[item.case][item.row]), bool(feedback[item.case][item.row])
+
+    def queue(items: Iterable[Item]) -> None:
+        for it in items:
+            later[need(it)].append(it)
+
     # What every batch of the call needs, where that is known in advance (a
     # smaller compiled program); None: decided per batch at run time. A call of
     # one screening batch gains nothing from skipping the memory scan or the
@@ -303,7 +326,7 @@ def run_queue(
             and (item.stage == "finish" or spent >= given)  # stopped by its pass
         ):
             stage = "whiten" if item.stage == "whiten" else "more"
-            queues[stage].append(
+            later[need(item)].append(
                 Item(  # resumes with its pending step (one more step to re-evaluate)
                     c,
                     item.row,
@@ -320,7 +343,7 @@ def run_queue(
         outstanding[c] -= 1
         if item.stage == "screen" and outstanding[c] == 0:
             extra = finishing_items(c, preps[c], fits[c])
-            queues["finish"].extend(extra)
+            queue(extra)
             outstanding[c] = len(extra)
         elif item.stage in ("finish", "more") and outstanding[c] == 0:
             fits[c]["theta_std"] = parameter_std(preps[c], fits[c])
@@ -333,7 +356,7 @@ def run_queue(
                 # the rows fitted by prediction error (the others keep their
                 # output-error fits: `attribute` tests only these by likelihood)
                 fits[c]["whitened"]["rows"] = sorted({it.row for it in extra})
-            queues["whiten"].extend(extra)
+            queue(extra)
             outstanding[c] = len(extra)
         if outstanding[c] == 0:
             if "whitened" in fits[c]:
@@ -341,27 +364,84 @@ def run_queue(
                 w["theta_std"] = parameter_std(preps[c], w)
             on_case(c, fits[c])
 
-    while any(queues.values()):
-        order = ("whiten", "more", "finish", "screen")
-        full = [s for s in order if len(queues[s]) >= batch]
-        if full:
-            take = [queues[full[0]].popleft() for _ in range(batch)]
-        elif queues["screen"]:
-            take = list(queues["screen"])
-            queues["screen"].clear()
-        else:  # the end: what is left, in padded batches (a pass each)
-            take = []
-            for stage in ("whiten", "more", "finish"):
-                while queues[stage] and len(take) < batch:
-                    take.append(queues[stage].popleft())
-        budgets = [
-            it.budget if it.stage == "screen" else min(it.budget, FIRST_PASS)
-            for it in take
-        ]
-        width = tail if len(take) <= tail else batch
+    n_dev = jax.local_device_count()
+    while screen or any(later.values()):
+        if screen and _most_whole_shares(later, batch // n_dev) < n_dev:
+            take = [screen.popleft() for _ in range(min(batch, len(screen)))]
+            budgets = [it.budget for it in take]
+            real = [True] * len(take)
+            width = tail if len(take) <= tail else batch
+        else:  # after screening: each device's share of one need
+            width = batch
+            if _whole_shares(later, batch // n_dev) < n_dev:  # the end
+                if _shares_needed(later, tail // n_dev) <= n_dev:
+                    width = tail
+            take, real = _compose(later, width // n_dev, n_dev)
+            budgets = [
+                min(it.budget, FIRST_PASS) if r else 0
+                for it, r in zip(take, real, strict=True)
+            ]
         out = run_batch(take, budgets, rows, arrays, width, while_compiling, flags)
         for j, it in enumerate(take):
-            done(it, {name: x[j] for name, x in out.items()}, budgets[j])
+            if real[j]:
+                done(it, {name: x[j] for name, x in out.items()}, budgets[j])
+
+
+def _whole_shares(later: dict[tuple, deque], share: int) -> int:
+    """How many device shares of `share` items the needs' queues fill."""
+    return sum(len(q) // share for q in later.values())
+
+
+def _most_whole_shares(later: dict[tuple, deque], share: int) -> int:
+    """The most device shares of `share` items that one need's queue fills."""
+    return max((len(q) // share for q in later.values()), default=0)
+
+
+def _shares_needed(later: dict[tuple, deque], share: int) -> int:
+    """How many device shares of at most `share` items, each of one need, take
+    every queued item."""
+    return sum(-(-len(q) // share) for q in later.values())
+
+
+def _compose(
+    later: dict[tuple, deque], share: int, n_dev: int
+) -> tuple[list[Item], list[bool]]:
+    """A batch of `n_dev` device shares of `share` items taken from `later`
+    (queues by need), each share of one need: whole shares first, of a need
+    that fills the batch alone, else of the costlier needs (the memory scan,
+    the feedback loop) before the plain one, the fuller first; then part-filled
+    shares. A share's free lanes take rows of a need it runs anyway (one that
+    needs nothing more: plain rows in any share). Returns `(items, real)`: a
+    share padded with copies of its first item and missing shares with copies
+    of the batch's first (`real` False: at a zero budget, fitted for nothing).
+
+    `fit._fit_flat` decides per share whether to run the input-memory scan and
+    the feedback loop, so a share of rows that need neither runs at the cost of
+    the plain filter (on the 80 first cases of family B seed 9, 2 cores: 12
+    steps of 66 rows 0.5 s, against 2.2 s with rows of every need mixed)."""
+    keys = sorted(
+        later,
+        key=lambda k: (len(later[k]) // share < n_dev, not any(k), -len(later[k]), k),
+    )
+    parts = []  # (need, items)
+    for whole in (True, False):
+        for key in keys:
+            q = later[key]
+            while q and len(parts) < n_dev and (len(q) >= share or not whole):
+                parts.append((key, [q.popleft() for _ in range(min(share, len(q)))]))
+    # lanes left in a share carry rows of a need it runs anyway (no more than its)
+    for key, part in parts:
+        for other in keys:
+            q = later[other]
+            rides = all(o <= k for o, k in zip(other, key, strict=True))
+            while rides and q and len(part) < share:
+                part.append(q.popleft())
+    items, real = [], []
+    for _, part in parts + [((), [])] * (n_dev - len(parts)):
+        pad = part[0] if part else parts[0][1][0]
+        items += part + [pad] * (share - len(part))
+        real += [True] * len(part) + [False] * (share - len(part))
+    return items, real
 
 
 def run_batch(

@@ -2,6 +2,7 @@
 the finishing stage's restart of the re-fit, and the reported standard errors."""
 
 import textwrap
+from collections import deque
 
 import equinox as eqx
 import jax
@@ -15,7 +16,12 @@ from helpers import run_on_two_devices
 import hamjax.diagnosis.fit as fit_module
 import hamjax.diagnosis.schedule as schedule
 from hamjax._results import RESULTS
-from hamjax.diagnosis.augmented import NL_TABULATED, slot_index, uses_memory
+from hamjax.diagnosis.augmented import (
+    NL_TABULATED,
+    slot_index,
+    uses_feedback,
+    uses_memory,
+)
 from hamjax.diagnosis.fit import LAMBDA0, fit_batch, theta_std
 from hamjax.diagnosis.layout import N_MAX, prepare
 from hamjax.diagnosis.schedule import (
@@ -147,6 +153,18 @@ def test_a_padded_batch_is_its_rows_fitted_alone():
         fit_padded(rows, cases, np.full(m, 8), np.full(m, LAMBDA0), m - 1)
 
 
+def _split_queue(monkeypatch, keys_effects) -> list:
+    """A queue whose finishing rows split (a 2-step screening, passes of 3 steps,
+    a 10-step finishing budget) and the tiny cases `(key, effect)` it fits."""
+    monkeypatch.setattr(schedule, "SCREEN_STEPS", 2)
+    monkeypatch.setattr(schedule, "FIRST_PASS", 3)
+    monkeypatch.setattr(schedule, "FINISH_STEPS", 10)
+    return [
+        prepare(*tiny_case(jr.key(k), e, noise=1e-3), length=512, n_params=13)
+        for k, e in keys_effects
+    ]
+
+
 @pytest.mark.slow
 def test_a_case_fits_the_same_alone_and_among_other_cases(monkeypatch):
     # The queue's first pass (FIRST_PASS steps) and continuation split a finishing
@@ -157,13 +175,10 @@ def test_a_case_fits_the_same_alone_and_among_other_cases(monkeypatch):
     # finishing row split and stop at its budget, and the case alone (one batch)
     # and with three others (batches of 4 rows) must agree to rounding of the
     # other batch widths (1e-9; a lost step moves an unconverged row by far more).
-    monkeypatch.setattr(schedule, "SCREEN_STEPS", 2)
-    monkeypatch.setattr(schedule, "FIRST_PASS", 3)
-    monkeypatch.setattr(schedule, "FINISH_STEPS", 10)
-    preps = [
-        prepare(*tiny_case(jr.key(k), e, noise=1e-3), length=512, n_params=13)
-        for k, e in ((3, "extra_pole"), (5, "saturation"), (6, "backlash"), (7, "none"))
-    ]
+    preps = _split_queue(
+        monkeypatch,
+        ((3, "extra_pole"), (5, "saturation"), (6, "backlash"), (7, "none")),
+    )
     alone, among = {}, {}
     run_queue(preps[:1], 4 * len(preps[0].rows), lambda c, f: alone.setdefault(c, f))
     run_queue(preps, 4, lambda c, f: among.setdefault(c, f))
@@ -259,6 +274,76 @@ def test_the_narrower_tail_batches_leave_every_fit_as_full_batches_would(monkeyp
         for a, b in pairs:
             np.testing.assert_allclose(a["sse_est"], b["sse_est"], rtol=1e-9)
             np.testing.assert_allclose(a["theta"], b["theta"], rtol=1e-7, atol=1e-9)
+
+
+def test_each_device_share_after_screening_holds_rows_of_one_need():
+    # A device's share of a batch runs the input-memory scan and the feedback
+    # loop for every row in it if one row needs them (`fit._fit_flat`), so after
+    # screening `_compose` gives each share rows of one need: whole shares first
+    # (of a need that fills the batch alone, else of the costlier needs before
+    # the plain one), then what is left. A share's free lanes take rows that
+    # need nothing more than it (a plain row beside a memory row, never a
+    # feedback row); the rest of a share is padded with copies of its first
+    # item and a missing share with the batch's first, none of them fitted
+    # (`real` False). Every queued item is taken exactly once.
+    later = {
+        (False, False): deque(["a1", "a2", "a3", "a4", "a5"]),
+        (True, False): deque(["b1", "b2", "b3"]),
+        (False, True): deque(["c1"]),
+    }
+    first = schedule._compose(later, 2, 2)
+    second = schedule._compose(later, 2, 2)
+    third = schedule._compose(later, 2, 2)
+    assert first == (["a1", "a2", "a3", "a4"], [True] * 4)
+    assert second == (["b1", "b2", "b3", "a5"], [True] * 4)
+    assert third == (["c1"] * 4, [True, False, False, False])
+    assert not any(later.values())
+
+
+@pytest.mark.slow
+def test_the_queue_batches_each_need_apart_after_screening(monkeypatch):
+    # With one device a share is the whole batch: after screening no batch holds
+    # a row that needs the input-memory scan beside one that needs the feedback
+    # loop (`_compose`), and every case is still finished, its rows as
+    # they end when it is fitted alone (to rounding of the other batch widths,
+    # as in the tests above).
+    preps = _split_queue(
+        monkeypatch, ((3, "extra_pole"), (5, "saturation"), (6, "backlash"))
+    )
+    run_batch, needs = schedule.run_batch, []
+
+    def spy(take, budgets, rows, arrays, width, *args, **kwargs):
+        if take[0].stage != "screen":
+            needs.append(
+                {
+                    (
+                        bool(
+                            uses_memory(
+                                rows[it.case].free[it.row],
+                                preps[it.case].nominal.nl_kind,
+                            )
+                        ),
+                        bool(uses_feedback(rows[it.case].free[it.row])),
+                    )
+                    for it, b in zip(take, budgets, strict=True)
+                    if b > 0
+                }
+            )
+        return run_batch(take, budgets, rows, arrays, width, *args, **kwargs)
+
+    monkeypatch.setattr(schedule, "run_batch", spy)
+    among, alone = {}, {}
+    run_queue(preps, 16, lambda c, f: among.setdefault(c, f))
+    assert sorted(among) == [0, 1, 2]
+    # a batch's need is that of one of its rows: every other row rides along
+    tops = [tuple(map(any, zip(*n, strict=True))) for n in needs]
+    assert len(needs) > 1 and all(t in n for t, n in zip(tops, needs, strict=True))
+    assert len(set(tops)) > 1, needs  # rows of several needs were finished
+    run_queue(preps[2:], 16, lambda c, f: alone.setdefault(c, f))
+    np.testing.assert_allclose(among[2]["sse_est"], alone[0]["sse_est"], rtol=1e-9)
+    np.testing.assert_allclose(
+        among[2]["theta"], alone[0]["theta"], rtol=1e-7, atol=1e-9
+    )
 
 
 def test_a_rows_fit_does_not_see_a_diverging_batch_mate():

@@ -372,10 +372,9 @@ def run_queue(
             real = [True] * len(take)
             width = tail if len(take) <= tail else batch
         else:  # after screening: each device's share of one need
-            width = batch
-            if _whole_shares(later, batch // n_dev) < n_dev:  # the end
-                if _shares_needed(later, tail // n_dev) <= n_dev:
-                    width = tail
+            # narrower only at the end, where what is left fits in its shares
+            narrow = _shares_needed(later, tail // n_dev) <= n_dev
+            width = tail if narrow else batch
             take, real = _compose(later, width // n_dev, n_dev)
             budgets = [
                 min(it.budget, FIRST_PASS) if r else 0
@@ -385,11 +384,6 @@ def run_queue(
         for j, it in enumerate(take):
             if real[j]:
                 done(it, {name: x[j] for name, x in out.items()}, budgets[j])
-
-
-def _whole_shares(later: dict[tuple, deque], share: int) -> int:
-    """How many device shares of `share` items the needs' queues fill."""
-    return sum(len(q) // share for q in later.values())
 
 
 def _most_whole_shares(later: dict[tuple, deque], share: int) -> int:

@@ -167,3 +167,44 @@ def lfilter_numpy(b: np.ndarray, a: np.ndarray, u: np.ndarray) -> np.ndarray:
 
     u = np.asarray(u, float)
     return signal.lfilter(np.asarray(b, float), np.asarray(a, float), u, axis=-1)
+
+
+STATE_BLOCK = 64  # samples a block of `state_space_numpy`
+
+
+def state_space_numpy(A, B, C, D, u: np.ndarray) -> np.ndarray:
+    r"""The response from rest of the single-input single-output discrete state
+    space $x_{k+1} = A x_k + B u_k$, $y_k = C x_k + D u_k$ to the samples `u`
+    (last axis), on the host in blocks of $L$ = `STATE_BLOCK` samples: within a
+    block $y_{bL+i} = C A^i x_{bL} + \sum_{j \le i} h_{i-j} u_{bL+j}$ ($h_0 = D$,
+    $h_i = C A^{i-1} B$), and $x_{(b+1)L} = A^L x_{bL} + \sum_j A^{L-1-j} B
+    u_{bL+j}$: the same sums as the step-by-step recursion (the state the scan
+    of the simulator carries), in matrix products, with a loop of one step a
+    block (a loop of one step a sample took 6.5 ms a record of 2500 samples,
+    run three times a diagnosed case). Equal to the recursion to rounding,
+    tested; a block with no state (a static gain) is $D u$."""
+    A, B, C, D = (np.asarray(x, float) for x in (A, B, C, D))
+    u = np.asarray(u, float)
+    d = float(D.reshape(-1)[0])
+    n_x = A.shape[0]
+    if n_x == 0:
+        return d * u
+    L, n = STATE_BLOCK, u.shape[-1]
+    nb = -(-n // L)
+    U = np.concatenate([u, np.zeros(u.shape[:-1] + (nb * L - n,))], axis=-1)
+    U = U.reshape(u.shape[:-1] + (nb, L))
+    powers = [np.eye(n_x)]  # A^0 .. A^L
+    for _ in range(L):
+        powers.append(A @ powers[-1])
+    observe = np.stack([C[0] @ P for P in powers[:L]])  # (L, n_x): C A^i
+    h = np.r_[d, observe[: L - 1] @ B[:, 0]]  # Markov parameters h_0 .. h_{L-1}
+    lag = np.arange(L)[:, None] - np.arange(L)[None, :]
+    toeplitz = np.where(lag >= 0, h[np.clip(lag, 0, L - 1)], 0.0)  # (L, L)
+    drive = np.stack([P @ B[:, 0] for P in powers[L - 1 :: -1]], 1)  # A^{L-1-j} B
+    x = np.zeros(u.shape[:-1] + (n_x,))
+    starts = np.empty(u.shape[:-1] + (nb, n_x))
+    for b in range(nb):
+        starts[..., b, :] = x
+        x = x @ powers[L].T + U[..., b, :] @ drive.T
+    Y = U @ toeplitz.T + starts @ observe.T
+    return Y.reshape(u.shape[:-1] + (nb * L,))[..., :n]

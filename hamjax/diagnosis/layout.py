@@ -10,7 +10,7 @@ import numpy as np
 from jax import lax
 from jaxtyping import Array, Float
 
-from .._filters import lfilter_numpy, zoh_tf
+from .._filters import lfilter_numpy, state_space_numpy, zoh_tf
 from ..models import (
     Backlash,
     ContinuousTransferFunction,
@@ -854,8 +854,20 @@ def prepare(
     L = length or bucket(max(n_est, n_val))
     u_est = np.asarray(_static_numpy(nom, est["v"]))
     u_val = np.asarray(_static_numpy(nom, val["v"]))
-    w_est = _response_numpy(plant.linear, u_est, dt)
-    w_val = _response_numpy(plant.linear, u_val, dt)
+    # the responses to the two records and to the unit step (`delay_shortlist`)
+    # in one call, each padded at its end (from rest: causal)
+    n_most = max(n_est, n_val)
+    w_est, w_val, step_est = _response_numpy(
+        plant.linear,
+        np.stack(
+            [
+                np.pad(x, (0, n_most - x.shape[0]))
+                for x in (u_est, u_val, np.ones(n_est))
+            ]
+        ),
+        dt,
+    )
+    w_est, w_val, step_est = w_est[:n_est], w_val[:n_val], step_est[:n_est]
     v = est["v"]
     dw = np.diff(w_est) / dt if n_est > 1 else np.zeros(1)
     t_dom = dominant_time_constant(nom.den, nom.is_ct, dt)
@@ -956,7 +968,7 @@ def prepare(
         delay_shortlist(
             est["y"],
             w_est,
-            step=_response_numpy(plant.linear, np.ones(n_est), dt),
+            step=step_est,
             u0=float(u_est[0]),
             max_delay=delay_range(t_dom, n_est),
             t_dom=t_dom,
@@ -1188,22 +1200,18 @@ def n_free_parameters(plant: Hammerstein, *, fitted: bool = False) -> int:
 
 
 def _response_numpy(linear, u: np.ndarray, dt: float) -> np.ndarray:
-    """Nominal linear response from rest (NumPy: no compilation per record length)."""
+    """Nominal linear response from rest (NumPy: no compilation per record
+    length), along the last axis of `u`: a continuous block through its exact
+    zero-order-hold state space (`zoh_tf`, `state_space_numpy`)."""
+    u = np.asarray(u, float)
     if isinstance(linear, ContinuousTransferFunction):
         A, B, C, D = zoh_tf(np.asarray(linear.num), np.asarray(linear.den), dt, xp=np)
-    else:
-        b, a = np.asarray(linear.b), np.asarray(linear.a)
-        n = max(a.shape[0], b.shape[0])
-        b = np.r_[b, np.zeros(n - b.shape[0])]
-        a = np.r_[a, np.zeros(n - a.shape[0])]
-        return lfilter_numpy(b, a, np.asarray(u, float))  # a[0] == 1
-    x = np.zeros(A.shape[0])
-    y = np.empty(u.shape[0])
-    Bc, Cr, d = B[:, 0], C[0], float(D[0, 0])
-    for k, uk in enumerate(u):
-        y[k] = Cr @ x + d * uk
-        x = A @ x + Bc * uk
-    return y
+        return state_space_numpy(A, B, C, D, u)
+    b, a = np.asarray(linear.b), np.asarray(linear.a)
+    n = max(a.shape[0], b.shape[0])
+    b = np.r_[b, np.zeros(n - b.shape[0])]
+    a = np.r_[a, np.zeros(n - a.shape[0])]
+    return lfilter_numpy(b, a, u)  # a[0] == 1
 
 
 def _static_numpy(nom: Nominal, v: np.ndarray) -> np.ndarray:

@@ -17,6 +17,7 @@ from hamjax.diagnosis.augmented import (
     slot_index,
 )
 from hamjax.diagnosis.diagnose import diagnose_many
+from hamjax.diagnosis.effects import time_delay as td
 from hamjax.diagnosis.effects.time_delay import (
     MAX_DELAY,
     delay_range,
@@ -190,6 +191,95 @@ def test_shortlist_sees_through_a_mis_set_time_constant(getkey):
     assert 1 in kept, kept
     plain = delay_shortlist(y, w, **start, max_delay=40, t_dom=np.inf)  # no re-fit
     assert 1 not in plain, plain
+
+
+def _lstsq_reference(y, series, u0, m, f):
+    # the screen's least squares written out independently: numpy.linalg.lstsq on
+    # the held, delayed, fraction-split columns scaled to unit norm
+    cols = []
+    for x, s in series:
+        held = delayed_response(x, s, u0, m)
+        later = np.r_[0.0, held[:-1]]
+        c = (1 - f) * held + f * later
+        cols.append(c / np.linalg.norm(c))
+    X = np.stack(cols, 1)
+    return float(np.sum((y - X @ np.linalg.lstsq(X, y, rcond=None)[0]) ** 2))
+
+
+@pytest.mark.parametrize("t_dom", [np.inf, 8.0, 1e15])
+def test_screen_residuals_from_gram_products_equal_least_squares(getkey, t_dom):
+    # Every delay m + f of the screen, its residual from the Gram matrices against
+    # the least-squares solve itself: equal to 1e-10 of |y|^2 (rounding of sums
+    # of n = 600 products: ~n eps, times the conditioning the screen bounds by
+    # SCREEN_KAPPA). t_dom = 1e15: a nominal an integrator in all but name,
+    # whose lag column is 1e-15 of the other (the solve once dropped it).
+    n, u0 = 600, 0.7
+    v = staircase(getkey(), n, hold=12)
+    w = _zoh_delayed_lag(v, 0.0)
+    step = _zoh_delayed_lag(np.ones(n), 0.0)
+    y = _zoh_delayed_lag(v, 5.5, t_lag=1.2 * T_LAG, hold_v0=True)
+    y = y + 0.01 * np.asarray(jr.normal(getkey(), (n,)))
+    series = [(w, step)]
+    if np.isfinite(t_dom):
+        series.append((td._lag(w, t_dom), td._lag(step, t_dom)))
+    sse, unsure = td._screen_sse(series, y, u0, 30)
+    assert not unsure.any()
+    for m in range(31):
+        for j, f in enumerate(np.arange(0.0, 1.0, td.SCREEN_STEP)):
+            if not 0 < m + f <= 30:
+                assert sse[m, j] == np.inf
+                continue
+            ref = _lstsq_reference(y, series, u0, m, f)
+            assert abs(sse[m, j] - ref) <= 1e-10 * (y @ y), (m, f)
+
+
+@pytest.mark.parametrize("max_delay", [12, 60, 79])
+def test_shortlist_is_the_least_squares_ranking(getkey, max_delay):
+    # Against a brute-force ranking by `_lstsq_reference` over every whole part
+    # and fraction (ties by the smaller m), with and without the lag's re-fit
+    # column (1e15: the column 1e-15 of the other, which the solve once dropped
+    # as below its rank cut-off); 79 on a record of 80 is a delay as long as the record, which the
+    # screen solves outright. The output: a delay of 4.25 behind a lag 20 %
+    # slower than the nominal's, noise 0.05.
+    n = 80 if max_delay == 79 else 400
+    v = staircase(getkey(), n, hold=8)
+    w = _zoh_delayed_lag(v, 0.0)
+    step = _zoh_delayed_lag(np.ones(n), 0.0)
+    y = _zoh_delayed_lag(v, 4.25, t_lag=1.2 * T_LAG, hold_v0=True)
+    y = y + 0.05 * np.asarray(jr.normal(getkey(), (n,)))
+    u0 = float(v[0])
+    for t_dom in (np.inf, T_LAG / DT, 1e15):
+        series = [(w, step)]
+        if np.isfinite(t_dom):
+            series.append((td._lag(w, t_dom), td._lag(step, t_dom)))
+        best = {}
+        for m in range(max_delay + 1):
+            for f in np.arange(0.0, 1.0, td.SCREEN_STEP):
+                if 0 < m + f <= max_delay:
+                    e = _lstsq_reference(y, series, u0, m, f)
+                    best[m] = min(best.get(m, np.inf), e)
+        ranked = tuple(sorted(best, key=lambda m: (best[m], m)))
+        for keep in (1, 2, 3):
+            got = delay_shortlist(
+                y, w, step=step, u0=u0, max_delay=max_delay, t_dom=t_dom, keep=keep
+            )
+            assert got == ranked[:keep], (t_dom, keep, got, ranked[:keep])
+
+
+def test_shortlist_does_not_depend_on_the_scale_of_the_response(getkey):
+    # The least squares is blind to the scale of its columns: the nominal's
+    # output and step response scaled by 1e-12 or 1e12 keep the same shortlist.
+    n = 400
+    v = staircase(getkey(), n, hold=10)
+    w = _zoh_delayed_lag(v, 0.0)
+    step = _zoh_delayed_lag(np.ones(n), 0.0)
+    y = _zoh_delayed_lag(v, 7.5, t_lag=1.1 * T_LAG, hold_v0=True)
+    y = y + 0.02 * np.asarray(jr.normal(getkey(), (n,)))
+    kw = dict(u0=float(v[0]), max_delay=40, t_dom=T_LAG / DT, keep=3)
+    ref = delay_shortlist(y, w, step=step, **kw)
+    assert ref[0] in (7, 8), ref
+    for scale in (1e-12, 1e12):
+        assert delay_shortlist(y, scale * w, step=scale * step, **kw) == ref
 
 
 @pytest.mark.parametrize("m", [0, 3, 14])

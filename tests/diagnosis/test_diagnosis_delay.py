@@ -201,9 +201,20 @@ def _lstsq_reference(y, series, u0, m, f):
         held = delayed_response(x, s, u0, m)
         later = np.r_[0.0, held[:-1]]
         c = (1 - f) * held + f * later
-        cols.append(c / np.linalg.norm(c))
+        size = np.linalg.norm(c)
+        cols.append(c / size if size > 0 else c)  # a zero column stays zero
     X = np.stack(cols, 1)
     return float(np.sum((y - X @ np.linalg.lstsq(X, y, rcond=None)[0]) ** 2))
+
+
+def _brute_force(y, series, u0, max_delay, keep):
+    best = {}
+    for m in range(max_delay + 1):
+        for f in np.arange(0.0, 1.0, td.SCREEN_STEP):
+            if 0 < m + f <= max_delay:
+                e = _lstsq_reference(y, series, u0, m, f)
+                best[m] = min(best.get(m, np.inf), e)
+    return tuple(sorted(best, key=lambda m: (best[m], m))[:keep])
 
 
 @pytest.mark.parametrize("t_dom", [np.inf, 8.0, 1e15])
@@ -238,9 +249,9 @@ def test_shortlist_is_the_least_squares_ranking(getkey, max_delay):
     # Against a brute-force ranking by `_lstsq_reference` over every whole part
     # and fraction (ties by the smaller m), with and without the lag's re-fit
     # column (1e15: the column 1e-15 of the other, which the solve once dropped
-    # as below its rank cut-off); 79 on a record of 80 is a delay as long as the record, which the
-    # screen solves outright. The output: a delay of 4.25 behind a lag 20 %
-    # slower than the nominal's, noise 0.05.
+    # as below its rank cut-off); 79 on a record of 80 is a delay as long as
+    # the record, which the screen solves outright. The output: a delay of 4.25
+    # behind a lag 20 % slower than the nominal's, noise 0.05.
     n = 80 if max_delay == 79 else 400
     v = staircase(getkey(), n, hold=8)
     w = _zoh_delayed_lag(v, 0.0)
@@ -252,18 +263,12 @@ def test_shortlist_is_the_least_squares_ranking(getkey, max_delay):
         series = [(w, step)]
         if np.isfinite(t_dom):
             series.append((td._lag(w, t_dom), td._lag(step, t_dom)))
-        best = {}
-        for m in range(max_delay + 1):
-            for f in np.arange(0.0, 1.0, td.SCREEN_STEP):
-                if 0 < m + f <= max_delay:
-                    e = _lstsq_reference(y, series, u0, m, f)
-                    best[m] = min(best.get(m, np.inf), e)
-        ranked = tuple(sorted(best, key=lambda m: (best[m], m)))
         for keep in (1, 2, 3):
             got = delay_shortlist(
                 y, w, step=step, u0=u0, max_delay=max_delay, t_dom=t_dom, keep=keep
             )
-            assert got == ranked[:keep], (t_dom, keep, got, ranked[:keep])
+            ref = _brute_force(y, series, u0, max_delay, keep)
+            assert got == ref, (t_dom, keep, got, ref)
 
 
 def test_shortlist_does_not_depend_on_the_scale_of_the_response(getkey):
@@ -278,8 +283,28 @@ def test_shortlist_does_not_depend_on_the_scale_of_the_response(getkey):
     kw = dict(u0=float(v[0]), max_delay=40, t_dom=T_LAG / DT, keep=3)
     ref = delay_shortlist(y, w, step=step, **kw)
     assert ref[0] in (7, 8), ref
-    for scale in (1e-12, 1e12):
+    for scale in (1e-160, 1e-12, 1e12, 1e160):  # 1e160: its squares overflow
         assert delay_shortlist(y, scale * w, step=scale * step, **kw) == ref
+
+
+def test_the_screen_flags_a_column_that_cancels(getkey):
+    # A zero nominal output: the delayed column at m = 0, u0 (s - s), cancels to
+    # rounding noise, whose residual from the products came out near -1e279,
+    # finite and once unflagged, so the shortlist was (0,) and not the least
+    # squares' best. Its bound over its size flags it, and it is solved.
+    n, u0 = 200, 0.7
+    v = staircase(getkey(), n, hold=5)
+    step = _zoh_delayed_lag(np.ones(n), 0.0)
+    y = _zoh_delayed_lag(v, 4.0, hold_v0=True)
+    y = y + 0.01 * np.asarray(jr.normal(getkey(), (n,)))
+    zero = [(np.zeros(n), step)]
+    _, unsure = td._screen_sse(zero, y, u0, 12)
+    assert unsure[0]
+    for keep in (1, 2):
+        got = delay_shortlist(
+            y, np.zeros(n), step=step, u0=u0, max_delay=12, t_dom=np.inf, keep=keep
+        )
+        assert got == _brute_force(y, zero, u0, 12, keep)
 
 
 @pytest.mark.parametrize("m", [0, 3, 14])

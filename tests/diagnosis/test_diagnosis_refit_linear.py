@@ -44,6 +44,13 @@ def _binary(key, n: int, level: float) -> np.ndarray:
     return level * np.repeat(2.0 * s - 1.0, 4)[:n]
 
 
+# The rows these tests count are those of an open-loop record. Its feedback test
+# (`looks_closed_loop`) still fires at its level alpha (seed 2017960134 does),
+# and then the stick-slip profile adds backlash starts that re-fit the linear
+# block too; `screens=False` leaves that screen (and the delay screen) out.
+OPEN = {"screens": False}
+
+
 def _records(key):
     k1, k2, k3, k4 = jr.split(key, 4)
     out = []
@@ -60,10 +67,12 @@ def test_row_offered_only_for_a_fitted_discrete_nominal(getkey):
     est, val = _records(getkey())
     plant = fit_nominal(DT, est)
     P = _fitted_n_params()
-    own = prepare(plant, DT, est, val, n_params=P, fitted_nominal=True)
-    given = prepare(plant, DT, est, val, n_params=P)
+    own = prepare(plant, DT, est, val, n_params=P, fitted_nominal=True, **OPEN)
+    given = prepare(plant, DT, est, val, n_params=P, **OPEN)
     lin = hj.ContinuousTransferFunction(np.array([1.0]), np.array([0.5, 1.0]))
-    ct = prepare(hj.Hammerstein(hj.Identity(), lin), DT, est, val, fitted_nominal=True)
+    ct = prepare(
+        hj.Hammerstein(hj.Identity(), lin), DT, est, val, fitted_nominal=True, **OPEN
+    )
     rows = [(n, r) for n, r in own.rows if refits_linear(r)]
     assert [n for n, _ in rows] == ["output_nonlinearity", LINEAR_TWIN]
     assert not any(refits_linear(r) for _, r in given.rows + ct.rows)
@@ -92,7 +101,13 @@ def test_a_strictly_proper_nominal_keeps_its_zero_b0(getkey):
     for b, freed in (([0.0, 0.3, 0.15], False), ([0.1, 0.3, 0.15], True)):
         plant = hj.Hammerstein(hj.Identity(), hj.DiscreteTransferFunction(b, A, DT))
         prep = prepare(
-            plant, DT, est, val, n_params=_fitted_n_params(), fitted_nominal=True
+            plant,
+            DT,
+            est,
+            val,
+            n_params=_fitted_n_params(),
+            fitted_nominal=True,
+            **OPEN,
         )
         rows = [np.asarray(r.free) for _, r in prep.rows if refits_linear(r)]
         assert len(rows) == 2
@@ -105,7 +120,7 @@ def test_row_at_neutral_is_the_nominal(getkey):
     est, val = _records(getkey())
     plant = fit_nominal(DT, est)
     prep = prepare(
-        plant, DT, est, val, n_params=_fitted_n_params(), fitted_nominal=True
+        plant, DT, est, val, n_params=_fitted_n_params(), fitted_nominal=True, **OPEN
     )
     rows = [r for _, r in prep.rows if refits_linear(r)]
     assert len(rows) == 2  # the row and its twin

@@ -166,3 +166,10 @@ def test_state_space_numpy_equals_the_recursion_and_dlsim(num, den, dt):
         np.testing.assert_allclose(got[k], ref, rtol=0, atol=1e-12 * scale)
         one = state_space_numpy(A, B, C, D, u[k, :777])  # 12 blocks and a part
         np.testing.assert_allclose(one, ref[:777], rtol=0, atol=1e-12 * scale)
+        short = state_space_numpy(A, B, C, D, u[k, :40])  # less than one block
+        np.testing.assert_allclose(short, ref[:40], rtol=0, atol=1e-12 * scale)
+    # two batch axes: each record as alone
+    grid = state_space_numpy(A, B, C, D, u[None, :, :300].repeat(2, axis=0))
+    assert grid.shape == (2, 3, 300)
+    peak = np.max(np.abs(got))
+    np.testing.assert_allclose(grid[1], got[:, :300], rtol=0, atol=1e-12 * peak)

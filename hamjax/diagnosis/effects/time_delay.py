@@ -16,7 +16,6 @@ MAX_DELAY = 8
 SCREEN_STEP = 0.25  # resolution (samples) of the shortlist's fractional screen
 # the part of |y|^2 within which the screen's best whole parts are solved again
 SCREEN_TOL = 1e-6
-SCREEN_KAPPA = 1e6  # conditioning beyond which the screen's Gram products solve again
 SCREEN_ELEMENTS = 1 << 20  # shifted samples the screen holds at once (8 MiB)
 
 
@@ -90,7 +89,8 @@ def _shift(x: np.ndarray, m: int) -> np.ndarray:
     """$x_{k-m}$, zero before $t = 0$ (a block at rest)."""
     if m == 0:
         return x
-    return np.concatenate([np.zeros(m), x[: x.shape[0] - m]])
+    n = x.shape[0]
+    return np.concatenate([np.zeros(min(m, n)), x[: max(n - m, 0)]])
 
 
 def delayed_response(w: np.ndarray, step: np.ndarray, u0: float, m: int) -> np.ndarray:
@@ -116,6 +116,8 @@ def _lstsq_sse(series, y: np.ndarray, u0: float, m: int, f: float) -> float:
     and was dropped, though it is as well determined)."""
     cols = [delayed_response(x, s, u0, m) for x, s in series]
     X = np.stack([(1 - f) * c + f * _shift(c, 1) for c in cols], 1)
+    peak = np.max(np.abs(X), axis=0)
+    X = X / np.where(peak > 0, peak, 1.0)  # the peak first: no overflow
     size = np.sqrt(np.sum(X * X, axis=0))
     X = X / np.where(size > 0, size, 1.0)  # unit columns: a cut-off blind to scale
     coef = np.linalg.lstsq(X, y, rcond=None)[0]
@@ -136,13 +138,25 @@ def _shifted_products(x: np.ndarray, top: int, Z: np.ndarray) -> np.ndarray:
     )
 
 
+def _unit(x: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The pair `(x, s)` over the norm of `x` (its peak first: no overflow), or as
+    it is where `x` is zero."""
+    peak = np.max(np.abs(x)) if x.size else 0.0
+    if not peak > 0:
+        return x, s
+    x, s = x / peak, s / peak
+    size = np.sqrt(x @ x)
+    return x / size, s / size
+
+
 def _screen_sse(
     series, y: np.ndarray, u0: float, max_delay: int
 ) -> tuple[np.ndarray, np.ndarray]:
     r"""`_lstsq_sse` of every whole part $m \le$ `max_delay` (rows) and fraction
     (columns; `inf` where $m + f$ is out of range) from the Gram matrices of the
     columns and `y` ($\lVert y \rVert^2 - b^\top G^{-1} b$), and per whole part
-    whether that may be off by more than $10^{-9} \lVert y \rVert^2$.
+    whether that may be off by more than a quarter of `SCREEN_TOL`
+    $\lVert y \rVert^2$.
 
     A series' column is $(1 - f) A_m + f A_{m+1} + u_0 t_f$ with $A_m = q^{-m} g$,
     $g = x - u_0 s$ (`delayed_response`) and $t_f = (1 - f) s + f q^{-1} s$, so
@@ -150,39 +164,48 @@ def _screen_sse(
     matrix product) and of the rows among themselves: $A_m \cdot A'_{m+j}$ is a
     partial sum of $g \cdot q^{-j} g'$ over the first $n - m$ samples. A second
     series enters orthogonalised against the first and both at unit norm (the
-    same span); the difference of large numbers then loses about
-    $\epsilon\,\kappa\,\lVert y \rVert^2$, $\kappa = 1 / (1 - \rho^2)$ for
-    columns of correlation $\rho$, and a whole part with any $\kappa$ over
-    `SCREEN_KAPPA` is flagged for the caller to solve."""
-    n, F = y.shape[0], np.arange(0.0, 1.0, SCREEN_STEP)
-    pairs = [(np.asarray(x, float), np.asarray(s_, float)) for x, s_ in series]
-    if len(pairs) == 2 and pairs[0][0] @ pairs[0][0] > 0:
+    same span).
+
+    Each product is a sum of at most $n$ terms, each term within
+    $\epsilon$ of its size, so an entry of $G$ is within $n \epsilon c^2$ of
+    its value ($c = \lVert g \rVert + |u_0| \lVert s \rVert$ bounds a column's
+    norm), and $\lVert y \rVert^2 - b^\top G^{-1} b$ within about
+    $n \epsilon \kappa \lVert y \rVert^2$ with $\kappa = 1 / (1 - \rho^2)$ for
+    columns of correlation $\rho$, times $c^2 / G_{ii}$ for a column that
+    cancels to less than its bound. A whole part where that exceeds a quarter
+    of `SCREEN_TOL` (or whose residual is not finite or below that much under
+    zero) is flagged for the caller to solve."""
+    n, fractions = y.shape[0], np.arange(0.0, 1.0, SCREEN_STEP)
+    pairs = [_unit(np.asarray(x, float), np.asarray(s, float)) for x, s in series]
+    if len(pairs) == 2 and np.any(pairs[0][0]):
         (x1, s1), (x2, s2) = pairs
-        alpha = (x1 @ x2) / (x1 @ x1)
-        pairs[1] = (x2 - alpha * x1, s2 - alpha * s1)
-    pairs = [
-        (x / np.sqrt(x @ x), s_ / np.sqrt(x @ x)) if x @ x > 0 else (x, s_)
-        for x, s_ in pairs
+        alpha = x1 @ x2  # x1 at unit norm
+        pairs[1] = _unit(x2 - alpha * x1, s2 - alpha * s1)
+    g = [x - u0 * s for x, s in pairs]
+    bound = [
+        np.sqrt(gi @ gi) + abs(u0) * np.sqrt(s @ s)
+        for gi, (_, s) in zip(g, pairs, strict=True)
     ]
-    g = [x - u0 * s_ for x, s_ in pairs]
     k = len(pairs)
-    t = [s_ for _, s_ in pairs] + [_shift(s_, 1) for _, s_ in pairs]
+    t = [s for _, s in pairs] + [_shift(s, 1) for _, s in pairs]
     Z = np.stack([y, *t], 1)
     P = [_shifted_products(gi, max_delay + 1, Z) for gi in g]
-    m = np.arange(max_delay + 1)
-    a, b = 1.0 - F[None, :], F[None, :]
+    ms = np.arange(max_delay + 1)
+    c0, c1 = 1.0 - fractions[None, :], fractions[None, :]  # weights of m, m + 1
 
     def tail(p):  # sums over the first n - m samples, m = 0..max_delay + 1
         return np.cumsum(p)[n - 1 - np.arange(max_delay + 2)][:, None]
 
     def with_t(i, j):  # A_i . t_j, rows m, both fraction-split
         lo, hi = P[i][:, 1 + j : 2 + j], P[i][:, 1 + k + j : 2 + k + j]
-        return a * (a * lo[m] + b * hi[m]) + b * (a * lo[m + 1] + b * hi[m + 1])
+        return c0 * (c0 * lo[ms] + c1 * hi[ms]) + c1 * (
+            c0 * lo[ms + 1] + c1 * hi[ms + 1]
+        )
 
     Xy = [
-        a * P[i][m, :1]
-        + b * P[i][m + 1, :1]
-        + u0 * (a * (t[i] @ y) + b * (t[k + i] @ y))
+        c0 * P[i][ms, :1]
+        + c1 * P[i][ms + 1, :1]
+        + u0 * (c0 * (t[i] @ y) + c1 * (t[k + i] @ y))
         for i in range(k)
     ]
     G = {}
@@ -192,33 +215,36 @@ def _screen_sse(
             q01 = tail(g[i] * _shift(g[j], 1))
             q10 = tail(_shift(g[i], 1) * g[j])
             tt = (
-                a * a * (t[i] @ t[j])
-                + a * b * (t[i] @ t[k + j] + t[k + i] @ t[j])
-                + b * b * (t[k + i] @ t[k + j])
+                c0 * c0 * (t[i] @ t[j])
+                + c0 * c1 * (t[i] @ t[k + j] + t[k + i] @ t[j])
+                + c1 * c1 * (t[k + i] @ t[k + j])
             )
             G[i, j] = (
-                a * a * q00[m]
-                + a * b * (q01[m] + q10[m])
-                + b * b * q00[m + 1]
+                c0 * c0 * q00[ms]
+                + c0 * c1 * (q01[ms] + q10[ms])
+                + c1 * c1 * q00[ms + 1]
                 + u0 * (with_t(i, j) + with_t(j, i))
                 + u0 * u0 * tt
             )
-    tiny = np.finfo(float).tiny
-    g11 = np.maximum(G[0, 0], tiny)
-    fit = Xy[0] ** 2 / g11
-    kappa = np.ones_like(fit)
-    if k == 2:
-        g22 = np.maximum(G[1, 1], tiny)
-        rest = np.maximum(g22 - G[0, 1] ** 2 / g11, tiny)  # Schur complement
-        fit = fit + (Xy[1] - G[0, 1] * Xy[0] / g11) ** 2 / rest
-        kappa = g22 / rest
-    sse = float(y @ y) - fit
-    out = ~((m[:, None] + F[None, :] > 0) & (m[:, None] + F[None, :] <= max_delay))
-    sse[out], kappa[out] = np.inf, 1.0
-    unsure = ~np.all(np.isfinite(sse) | out, axis=1) | np.any(
-        kappa > SCREEN_KAPPA, axis=1
-    )
-    return sse, unsure
+    # a column that cancels to nothing gives inf or nan here: flagged, not used
+    with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
+        tiny = np.finfo(float).tiny
+        g11 = np.maximum(G[0, 0], tiny)
+        fit = Xy[0] ** 2 / g11
+        kappa = bound[0] ** 2 / g11
+        if k == 2:
+            g22 = np.maximum(G[1, 1], tiny)
+            rest = np.maximum(g22 - G[0, 1] ** 2 / g11, tiny)  # Schur complement
+            fit = fit + (Xy[1] - G[0, 1] * Xy[0] / g11) ** 2 / rest
+            kappa = np.maximum(kappa, bound[1] ** 2 / g22) * g22 / rest
+        y_y = float(y @ y)
+        sse = y_y - fit
+        out = ~((ms[:, None] + fractions > 0) & (ms[:, None] + fractions <= max_delay))
+        error = n * np.finfo(float).eps * kappa * y_y
+        doubt = ~np.isfinite(sse) | (sse < -SCREEN_TOL / 4 * y_y)
+        doubt |= ~(error <= SCREEN_TOL / 4 * y_y)
+    sse[out] = np.inf
+    return sse, np.any(doubt & ~out, axis=1)
 
 
 def delay_shortlist(
@@ -249,9 +275,10 @@ def delay_shortlist(
     $T$ to first order, and a mis-set time constant (15-20 % is common) does not
     pass for a shift. Every delay's residual comes from Gram products
     (`_screen_sse`, one pass over the record); the least squares itself
-    (`_lstsq_sse`) ranks the whole parts near the best and any the products
-    cannot judge to $10^{-9} \\lVert y \\rVert^2$, so the shortlist is the
-    solves' own (tested against a brute-force ranking)."""
+    (`_lstsq_sse`) ranks the whole parts within `SCREEN_TOL`
+    $\\lVert y \\rVert^2$ of the `keep`-th best and any the products cannot
+    judge to a quarter of that, so the shortlist is the solves' own (tested
+    against a brute-force ranking)."""
     y, w = np.asarray(y, float), np.asarray(w, float)
     step = np.asarray(step, float)
     if not (
@@ -266,8 +293,9 @@ def delay_shortlist(
         series.append((_lag(w, t_dom), _lag(step, t_dom)))
     # every delay's residual from the Gram matrices (`_screen_sse`), then the
     # least-squares solve itself for the whole parts it may have misjudged and
-    # for those within `SCREEN_TOL` of the `keep`-th best: the ranking is the
-    # solves' own
+    # for those within `SCREEN_TOL` |y|^2 of the `keep`-th best: the ranking is
+    # the solves' own (a part the products misjudge by under a quarter of that
+    # cannot fall outside it when the solves would keep it)
     fractions = np.arange(0.0, 1.0, SCREEN_STEP)
 
     def solve(m):
@@ -285,14 +313,14 @@ def delay_shortlist(
     valid = np.array(
         [any(0 < m + f <= max_delay for f in fractions) for m in range(max_delay + 1)]
     )
+    if keep < 1 or not valid.any():
+        return ()
     unsure &= valid
     best = {int(m): solve(int(m)) for m in np.flatnonzero(unsure)}
     approx[unsure] = [best[int(m)] for m in np.flatnonzero(unsure)]
     approx[~valid] = np.inf
-    if not valid.any():
-        return ()
-    tau = np.sort(approx)[min(keep, int(valid.sum())) - 1]
-    close = valid & ~unsure & (approx <= tau + SCREEN_TOL * float(y @ y))
+    cutoff = np.sort(approx)[min(keep, int(valid.sum())) - 1]
+    close = valid & ~unsure & (approx <= cutoff + SCREEN_TOL * float(y @ y))
     best |= {int(m): solve(int(m)) for m in np.flatnonzero(close)}
     return tuple(sorted(best, key=lambda m: (best[m], m))[:keep])
 

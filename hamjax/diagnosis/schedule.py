@@ -326,18 +326,20 @@ def run_queue(
             and (item.stage == "finish" or spent >= given)  # stopped by its pass
         ):
             stage = "whiten" if item.stage == "whiten" else "more"
-            later[need(item)].append(
-                Item(  # resumes with its pending step (one more step to re-evaluate)
-                    c,
-                    item.row,
-                    new["theta"],
-                    float(new["lam"]),
-                    item.budget - spent + 1,
-                    stage,
-                    item.replace,
-                    item.noise,
-                    resume=True,
-                )
+            queue(
+                [
+                    Item(  # resumes with its pending step (one more to re-evaluate)
+                        c,
+                        item.row,
+                        new["theta"],
+                        float(new["lam"]),
+                        item.budget - spent + 1,
+                        stage,
+                        item.replace,
+                        item.noise,
+                        resume=True,
+                    )
+                ]
             )
             return
         outstanding[c] -= 1

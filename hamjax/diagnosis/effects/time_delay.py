@@ -14,6 +14,7 @@ from ._base import AbstractEffect, StartContext
 # settling time); the neutral delay is 0.
 MAX_DELAY = 8
 SCREEN_STEP = 0.25  # resolution (samples) of the shortlist's fractional screen
+FRACTIONS = np.arange(0.0, 1.0, SCREEN_STEP)
 # the part of |y|^2 within which the screen's best whole parts are solved again
 SCREEN_TOL = 1e-6
 SCREEN_ELEMENTS = 1 << 20  # shifted samples the screen holds at once (8 MiB)
@@ -106,22 +107,38 @@ def delayed_response(w: np.ndarray, step: np.ndarray, u0: float, m: int) -> np.n
     return _shift(w, m) + u0 * (step - _shift(step, m))
 
 
-def _lstsq_sse(series, y: np.ndarray, u0: float, m: int, f: float) -> float:
-    """Residual sum of squares of `y` on the delayed outputs of `series` (pairs of
-    a response and its step response) for the delay $m + f$ (`delayed_response`,
-    the fraction split as in `fractional_split`): `numpy.linalg.lstsq` on the
-    columns scaled to unit norm (its rank cut-off is relative to the largest
-    singular value: behind a nominal with a time constant of $10^{15}$ samples,
-    an integrator in all but name, the lag's column is $10^{-15}$ of the other
-    and was dropped, though it is as well determined)."""
+def _lstsq_sse(series, y: np.ndarray, u0: float, m: int, max_delay: int) -> float:
+    """The least residual sum of squares of `y` on the delayed outputs of
+    `series` (pairs of a response and its step response) over the delays
+    $m + f$ in range (`_in_range`; `delayed_response`, the fraction split as in
+    `fractional_split`): `numpy.linalg.lstsq` on the columns scaled to unit
+    norm (`_norm`; its rank cut-off is relative to the largest singular value:
+    behind a nominal with a time constant of $10^{15}$ samples, an integrator
+    in all but name, the lag's column is $10^{-15}$ of the other and was
+    dropped, though it is as well determined)."""
     cols = [delayed_response(x, s, u0, m) for x, s in series]
-    X = np.stack([(1 - f) * c + f * _shift(c, 1) for c in cols], 1)
-    peak = np.max(np.abs(X), axis=0)
-    X = X / np.where(peak > 0, peak, 1.0)  # the peak first: no overflow
-    size = np.sqrt(np.sum(X * X, axis=0))
-    X = X / np.where(size > 0, size, 1.0)  # unit columns: a cut-off blind to scale
-    coef = np.linalg.lstsq(X, y, rcond=None)[0]
-    return float(np.sum((y - X @ coef) ** 2))
+    best = np.inf
+    for f in FRACTIONS[_in_range(max_delay)[m]]:
+        X = [(1 - f) * c + f * _shift(c, 1) for c in cols]
+        X = np.stack([x / (_norm(x) or 1.0) for x in X], 1)  # a cut-off blind to scale
+        coef = np.linalg.lstsq(X, y, rcond=None)[0]
+        best = min(best, float(np.sum((y - X @ coef) ** 2)))
+    return best
+
+
+def _norm(x: np.ndarray) -> float:
+    """The Euclidean norm of `x`, free of overflow (`scipy.linalg.norm`: BLAS
+    `nrm2` scales as it sums)."""
+    from scipy import linalg
+
+    return float(linalg.norm(x))
+
+
+def _in_range(max_delay: int) -> np.ndarray:
+    """Which delays $m + f$ the screen tries: rows $m = 0, \\dots,$ `max_delay`,
+    columns `FRACTIONS`, $0 < m + f \\le$ `max_delay`."""
+    total = np.arange(max_delay + 1)[:, None] + FRACTIONS[None, :]
+    return (total > 0) & (total <= max_delay)
 
 
 def _shifted_products(x: np.ndarray, top: int, Z: np.ndarray) -> np.ndarray:
@@ -139,14 +156,10 @@ def _shifted_products(x: np.ndarray, top: int, Z: np.ndarray) -> np.ndarray:
 
 
 def _unit(x: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The pair `(x, s)` over the norm of `x` (its peak first: no overflow), or as
-    it is where `x` is zero."""
-    peak = np.max(np.abs(x)) if x.size else 0.0
-    if not peak > 0:
-        return x, s
-    x, s = x / peak, s / peak
-    size = np.sqrt(x @ x)
-    return x / size, s / size
+    """The pair `(x, s)` over the norm of `x` (`_norm`), or as it is where `x` is
+    zero."""
+    size = _norm(x)
+    return (x / size, s / size) if size > 0 else (x, s)
 
 
 def _screen_sse(
@@ -175,7 +188,7 @@ def _screen_sse(
     cancels to less than its bound. A whole part where that exceeds a quarter
     of `SCREEN_TOL` (or whose residual is not finite or below that much under
     zero) is flagged for the caller to solve."""
-    n, fractions = y.shape[0], np.arange(0.0, 1.0, SCREEN_STEP)
+    n = y.shape[0]
     pairs = [_unit(np.asarray(x, float), np.asarray(s, float)) for x, s in series]
     if len(pairs) == 2 and np.any(pairs[0][0]):
         (x1, s1), (x2, s2) = pairs
@@ -191,7 +204,7 @@ def _screen_sse(
     Z = np.stack([y, *t], 1)
     P = [_shifted_products(gi, max_delay + 1, Z) for gi in g]
     ms = np.arange(max_delay + 1)
-    c0, c1 = 1.0 - fractions[None, :], fractions[None, :]  # weights of m, m + 1
+    c0, c1 = 1.0 - FRACTIONS[None, :], FRACTIONS[None, :]  # weights of m, m + 1
 
     def tail(p):  # sums over the first n - m samples, m = 0..max_delay + 1
         return np.cumsum(p)[n - 1 - np.arange(max_delay + 2)][:, None]
@@ -239,7 +252,7 @@ def _screen_sse(
             kappa = np.maximum(kappa, bound[1] ** 2 / g22) * g22 / rest
         y_y = float(y @ y)
         sse = y_y - fit
-        out = ~((ms[:, None] + fractions > 0) & (ms[:, None] + fractions <= max_delay))
+        out = ~_in_range(max_delay)
         error = n * np.finfo(float).eps * kappa * y_y
         doubt = ~np.isfinite(sse) | (sse < -SCREEN_TOL / 4 * y_y)
         doubt |= ~(error <= SCREEN_TOL / 4 * y_y)
@@ -296,32 +309,25 @@ def delay_shortlist(
     # for those within `SCREEN_TOL` |y|^2 of the `keep`-th best: the ranking is
     # the solves' own (a part the products misjudge by under a quarter of that
     # cannot fall outside it when the solves would keep it)
-    fractions = np.arange(0.0, 1.0, SCREEN_STEP)
-
-    def solve(m):
-        return min(
-            _lstsq_sse(series, y, float(u0), m, f)
-            for f in fractions
-            if 0 < m + f <= max_delay
-        )
-
     if max_delay + 2 <= y.shape[0]:
         sse, unsure = _screen_sse(series, y, float(u0), max_delay)
         approx = sse.min(axis=1)
     else:  # a delay as long as the record: solve every one
         approx, unsure = np.zeros(max_delay + 1), np.ones(max_delay + 1, bool)
-    valid = np.array(
-        [any(0 < m + f <= max_delay for f in fractions) for m in range(max_delay + 1)]
-    )
+    valid = _in_range(max_delay).any(axis=1)
     if keep < 1 or not valid.any():
         return ()
     unsure &= valid
-    best = {int(m): solve(int(m)) for m in np.flatnonzero(unsure)}
+
+    def solve(m):
+        return _lstsq_sse(series, y, float(u0), int(m), max_delay)
+
+    best = {int(m): solve(m) for m in np.flatnonzero(unsure)}
     approx[unsure] = [best[int(m)] for m in np.flatnonzero(unsure)]
     approx[~valid] = np.inf
     cutoff = np.sort(approx)[min(keep, int(valid.sum())) - 1]
     close = valid & ~unsure & (approx <= cutoff + SCREEN_TOL * float(y @ y))
-    best |= {int(m): solve(int(m)) for m in np.flatnonzero(close)}
+    best |= {int(m): solve(m) for m in np.flatnonzero(close)}
     return tuple(sorted(best, key=lambda m: (best[m], m))[:keep])
 
 

@@ -85,8 +85,9 @@ Decisions, in order:
   contract's definitions, not by a constant chosen on cases: drift is a trend
   *plus* the white noise, coloured noise has no white part, and a local level's
   white share of its innovations is $1 - \\alpha$ (`effects/drift.py`), so drift
-  is the local level with $\\alpha \\le 1/2$ and coloured noise the AR(1) or the
-  local level of higher gain; between the two (one parameter each) the higher
+  is the local level with $\\alpha \\le 1/2$ and coloured noise the AR(1), the
+  local level of higher gain or the fractional (flicker) predictor
+  (`effects/coloured_noise.py`); between the two (one parameter each) the higher
   likelihood on the estimation record chooses, validation judges it. (Before:
   the lower validation error among an unrestricted local level and the AR(1),
   which named ARMA and flicker noise `drift`.)
@@ -289,6 +290,9 @@ class Candidate:
     params: dict = field(default_factory=dict)
     measure: str = "simulation"
     est_sse: float = float("nan")  # noise models: one-step SSE on estimation
+    # noise models: `(name, value)` of the finite filter for prediction-error
+    # re-fits (`noise_fit.NoisePredictor.whitening`)
+    whitening: tuple[str, float] | None = None
 
 
 @dataclass
@@ -703,7 +707,7 @@ def noise_candidates(prep: Prepared, fit: dict | None = None) -> dict[str, Candi
     noise = noise_fit_numpy(*reference(prep, fit)[1:])
     cands = {}
     for effect in NOISE_NAMES:
-        value, err, pname, est_sse = noise[effect]  # a NoisePredictor
+        value, err, pname, est_sse, whitening = noise[effect]  # a NoisePredictor
         cands[effect] = Candidate(
             effect,
             -1,
@@ -713,6 +717,7 @@ def noise_candidates(prep: Prepared, fit: dict | None = None) -> dict[str, Candi
             params={pname: {"value": value, "std": 0.0}},
             measure="one_step_prediction",
             est_sse=est_sse,
+            whitening=whitening,
         )
     return cands
 
@@ -734,12 +739,16 @@ def whitening_predictor(
 ) -> tuple[str, float] | None:
     """`(name, value)` of the case's significant noise predictor (`noise`:
     `noise_candidates`), the filter $A(q)$ (`noise_fit.noise_filter`) through
-    which `attribute` judges the deterministic candidates and `schedule` re-fits
-    them by prediction error; None when the reference's validation residual
-    `r_ref` (`reference`) has no significant noise model."""
+    which `schedule` re-fits the deterministic candidates by prediction error
+    (`attribute` judges them through the predictor itself, `one_step_errors`:
+    the same but for the flicker model, which has no finite filter and is
+    replaced here by its low-order stand-in); None when the reference's
+    validation residual `r_ref` (`reference`) has no significant noise model."""
     c, ok, _ = nominal_noise(noise, r_ref)
     if not ok:
         return None
+    if c.whitening is not None:  # the flicker model's low-order stand-in
+        return c.whitening
     ((name, param),) = c.params.items()
     return name, param["value"]
 

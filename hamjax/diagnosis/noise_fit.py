@@ -21,7 +21,13 @@ import numpy as np
 from jaxtyping import Array, Bool, Float
 
 from .._filters import lfilter_numpy
-from .effects.coloured_noise import ar1_errors, fit_ar1
+from .effects.coloured_noise import (
+    ar1_errors,
+    fit_ar1,
+    fit_fractional,
+    fractional_errors,
+    fractional_errors_numpy,
+)
 from .effects.drift import (
     fit_local_level,
     fit_split_local_level,
@@ -35,9 +41,12 @@ class NoiseFit(eqx.Module):
 
     `drift` is the local level with gain at most `effects.drift.MAX_DRIFT_GAIN`
     (a white part at least half the innovations, `effects/drift.py`);
-    `coloured_noise` is the AR(1) predictor or the local level of higher gain,
-    whichever has the lower estimation SSE (`coloured_is_level` says which;
-    `coloured_param` is its pole or gain)."""
+    `coloured_noise` is the AR(1) predictor, the local level of higher gain or the
+    fractional (flicker) predictor, whichever has the lowest estimation SSE
+    (`effects/coloured_noise.py`). `coloured_param`, `coloured_is_level` and
+    `coloured_sse` are the better of the two low-order ones (its pole or gain);
+    `fractional_d` and `fractional_sse` the flicker model's, `is_fractional`
+    whether it is the class's; `coloured_errors` the class's validation errors."""
 
     coloured_param: Float[Array, ""]
     coloured_is_level: Bool[Array, ""]
@@ -46,6 +55,9 @@ class NoiseFit(eqx.Module):
     level_alpha: Float[Array, ""]
     level_errors: Float[Array, " L"]
     level_sse: Float[Array, ""]
+    fractional_d: Float[Array, ""]
+    fractional_sse: Float[Array, ""]
+    is_fractional: Bool[Array, ""]
 
 
 @eqx.filter_jit
@@ -59,15 +71,22 @@ def fit_noise_models(
     a = fit_ar1(r_est, m_est)
     s_ar1 = jnp.sum(m_est * ar1_errors(r_est, a) ** 2)
     alpha, s_drift, high, s_high = fit_split_local_level(r_est, m_est)
+    d, s_frac = fit_fractional(r_est, m_est)
     is_level = s_high < s_ar1
+    s_low = jnp.minimum(s_high, s_ar1)
+    is_frac = s_frac < s_low
+    e_low = jnp.where(is_level, local_level_errors(r_val, high), ar1_errors(r_val, a))
     return NoiseFit(
         jnp.where(is_level, high, a),
         is_level,
-        jnp.where(is_level, local_level_errors(r_val, high), ar1_errors(r_val, a)),
-        jnp.minimum(s_high, s_ar1),
+        jnp.where(is_frac, fractional_errors(r_val, d), e_low),
+        s_low,
         alpha,
         local_level_errors(r_val, alpha),
         s_drift,
+        d,
+        s_frac,
+        is_frac,
     )
 
 
@@ -76,8 +95,12 @@ class NoisePredictor(NamedTuple):
 
     value: float  # its parameter
     errors: np.ndarray  # validation one-step-ahead errors
-    name: str  # the parameter's name: "ar1_pole" or "level_gain"
+    name: str  # the parameter's name: "ar1_pole", "level_gain" or "fractional_d"
     est_sse: float  # one-step SSE on the estimation record
+    # `(name, value)` of the predictor whose filter `noise_filter` gives (itself,
+    # or for the fractional one, which has no finite filter, the low-order
+    # predictor of least estimation SSE: `whitening_stand_in`)
+    whitening: tuple[str, float]
 
 
 def noise_fit_numpy(r_est: np.ndarray, r_val: np.ndarray) -> dict:
@@ -93,21 +116,40 @@ def noise_fit_numpy(r_est: np.ndarray, r_val: np.ndarray) -> dict:
     pv[: r_val.shape[0]] = r_val
     f = fit_noise_models(jnp.asarray(pe), jnp.asarray(me), jnp.asarray(pv))
     k = r_val.shape[0]
-    coloured_name = "level_gain" if bool(f.coloured_is_level) else "ar1_pole"
+    low = ("level_gain" if bool(f.coloured_is_level) else "ar1_pole",)
+    low = (*low, float(f.coloured_param))
+    drift = ("level_gain", float(f.level_alpha))
+    if bool(f.is_fractional):
+        stand_in = whitening_stand_in(
+            (low, float(f.coloured_sse)), (drift, float(f.level_sse))
+        )
+        coloured = ("fractional_d", float(f.fractional_d), float(f.fractional_sse))
+    else:
+        stand_in, coloured = low, (*low, float(f.coloured_sse))
     return {
         "coloured_noise": NoisePredictor(
-            float(f.coloured_param),
+            coloured[1],
             np.asarray(f.coloured_errors)[:k],
-            coloured_name,
-            float(f.coloured_sse),
+            coloured[0],
+            coloured[2],
+            stand_in,
         ),
         "drift": NoisePredictor(
-            float(f.level_alpha),
+            drift[1],
             np.asarray(f.level_errors)[:k],
             "level_gain",
             float(f.level_sse),
+            drift,
         ),
     }
+
+
+def whitening_stand_in(*fits: tuple[tuple[str, float], float]) -> tuple[str, float]:
+    """The fractional predictor's stand-in for `noise_filter`: of the low-order
+    predictors `((name, value), estimation SSE)`, the one of least SSE (the
+    prediction-error re-fits need a finite filter; the judgement through the
+    noise model uses the fractional one itself, `predictor_errors`)."""
+    return min(fits, key=lambda f: f[1])[0]
 
 
 def noise_filter(name: str, value: float) -> tuple[np.ndarray, float]:
@@ -121,13 +163,21 @@ def noise_filter(name: str, value: float) -> tuple[np.ndarray, float]:
         return np.array([1.0, -value, 0.0]), 0.0
     if name == "level_gain":
         return np.array([1.0, -1.0, 0.0]), value - 1.0
+    if name == "fractional_d":
+        raise ValueError(
+            "noise_filter: the fractional predictor has no finite filter "
+            "(its NoisePredictor.whitening stands in)"
+        )
     raise ValueError(f"noise_filter: unknown noise predictor {name!r}")
 
 
 def predictor_errors(name: str, value: float, r: np.ndarray) -> np.ndarray:
     """One-step-ahead errors, on the host, of the fitted noise predictor `name`
     with parameter `value` on the residual `r`, from rest (`noise_filter`; the
-    NumPy twin of `ar1_errors` and of `local_level_errors`, with $\\ell_0 = 0$)."""
+    NumPy twin of `ar1_errors` and of `local_level_errors`, with $\\ell_0 = 0$,
+    and of `fractional_errors`)."""
+    if name == "fractional_d":
+        return fractional_errors_numpy(r, value)
     f, g = noise_filter(name, value)
     return lfilter_numpy(f, np.array([1.0, g, 0.0]), r)
 

@@ -65,9 +65,31 @@ def test_noise_effects_and_parameter_mismatch_named():
     # the truth's gain is 20 % higher than the nominal one: a parameter mismatch
     est["y"], val["y"] = 1.2 * est["y"], 1.2 * val["y"]
     items.append((plant, dt, est, val))
+    # flicker (1/f) noise in place of the white noise, shaped in frequency (no
+    # predictor's formula): its own predictor, fractional of order d = 1/2
+    plant, dt, est, val = tiny_case(jr.key(6), "none", noise=1e-6)
+    est, val = dict(est), dict(val)
+    for rec, key in ((est, jr.key(7)), (val, jr.key(8))):
+        n = rec["y"].shape[0]
+        spec = np.fft.rfft(np.asarray(jr.normal(key, (n,))))
+        spec[1:] /= np.sqrt(np.fft.rfftfreq(n)[1:])
+        spec[0] = 0.0
+        e = np.fft.irfft(spec, n)
+        rec["y"] = rec["y"] + 0.02 * e / np.std(e)
+    items.append((plant, dt, est, val))
     out = diagnose_many(items)
-    assert [d.effect for d in out] == ["coloured_noise", "drift", "parameter_mismatch"]
+    assert [d.effect for d in out] == [
+        "coloured_noise",
+        "drift",
+        "parameter_mismatch",
+        "coloured_noise",
+    ]
     assert np.isclose(out[0].ranking[0]["params"]["ar1_pole"]["value"], 0.9, atol=0.05)
+    # d: at these 400 samples, over 100 keys of the same noise alone, the class's
+    # predictor is the fractional one for 88 (the fixed keys here give it), d
+    # 0.45-0.65, mean 0.54, std 0.04: 0.2 is about 4 std
+    flicker = next(r for r in out[3].ranking if r["effect"] == "coloured_noise")
+    assert abs(flicker["params"]["fractional_d"]["value"] - 0.5) < 0.2, flicker
 
 
 @pytest.mark.slow

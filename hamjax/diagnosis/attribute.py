@@ -426,6 +426,23 @@ def _params(prep: Prepared, fit: dict, row: int, effect: str) -> dict:
     return out
 
 
+def lr_over_refit(
+    prep: Prepared, sse: np.ndarray, i_pm: int, row: int, m: int
+) -> tuple[float, float]:
+    """`(lr, threshold)` of `_nested_lr` for row `row` over the re-fit row `i_pm`
+    (estimation SSEs `sse`), the threshold for `m` classes (its docstring)."""
+    k = n_beyond(prep, row, i_pm)
+    p = n_fitted(prep, i_pm) + k
+    s2 = sse[row] / max(prep.n_est - p, 1)
+    lr = float((sse[i_pm] - sse[row]) / s2) if s2 > 0 else 0.0
+    threshold = 2.0 * np.log(m / LR_ALPHA)
+    if k > 2:
+        from scipy.stats import chi2
+
+        threshold = max(threshold, float(chi2.isf(LR_ALPHA / m, k)))
+    return lr, threshold
+
+
 def _nested_lr(
     prep: Prepared,
     sse: np.ndarray,
@@ -461,14 +478,7 @@ def _nested_lr(
     innovations, white under the noise model: the same $\\chi^2_k$) and `z` the
     validation $z$ of the two seen through $A$."""
     k = n_beyond(prep, best.row, pm.row)
-    p = n_fitted(prep, pm.row) + k
-    s2 = sse[best.row] / max(prep.n_est - p, 1)
-    lr = float((sse[pm.row] - sse[best.row]) / s2) if s2 > 0 else 0.0
-    threshold = 2.0 * np.log(m / LR_ALPHA)
-    if k > 2:
-        from scipy.stats import chi2
-
-        threshold = max(threshold, float(chi2.isf(LR_ALPHA / m, k)))
+    lr, threshold = lr_over_refit(prep, sse, pm.row, best.row, m)
     if z is None:
         z = improvement_z(pm.residual, best.residual)
     return {

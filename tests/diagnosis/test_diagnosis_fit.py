@@ -27,9 +27,11 @@ from hamjax.diagnosis.layout import N_MAX, prepare
 from hamjax.diagnosis.schedule import (
     REFIT,
     finishing_items,
+    leading_rows,
     merge,
     run_batch,
     run_queue,
+    tested_row,
 )
 from hamjax.papers.gap.demo_cases import coloured_case, tiny_case
 
@@ -411,7 +413,8 @@ def test_refit_restarted_from_structural_row_leaves_a_local_minimum():
     bad["sse_est"][i_pm] = 1e3 * full["sse_est"][i_pm]
     bad["result"][i_pm] = 0
     items = finishing_items(0, prep, bad)
-    assert [it.replace for it in items if it.row == i_pm] == ["lower"]  # converged
+    # converged: restarts only (from the leading row and the tested one)
+    assert {it.replace for it in items if it.row == i_pm} == {"lower"}
     rows = [_stack([r for _, r in prep.rows])]
     arrays = _stack([prep.arrays])
     out = run_batch(items, [200] * len(items), rows, arrays, len(items))
@@ -422,6 +425,35 @@ def test_refit_restarted_from_structural_row_leaves_a_local_minimum():
     # rows that had converged and are not the re-fit are left untouched
     others = [k for k in range(len(prep.rows)) if k != i_pm and full["result"][k] == 0]
     np.testing.assert_array_equal(bad["sse_est"][others], before["sse_est"][others])
+
+
+@pytest.mark.slow
+def test_refit_restarted_from_the_row_the_decision_tests():
+    # The re-fit is also restarted from the nominal part of the structural row
+    # of least validation error (`tested_row`), the one the nested
+    # likelihood-ratio test will judge over it, where that test finds it
+    # significant: never on a `none` case fitted to the end; on a re-fit stuck
+    # far off, from that row, whichever class leads by estimation SSE.
+    plant, dt, est, val = tiny_case(jr.key(8), "none", noise=1e-3)
+    prep = prepare(plant, dt, est, val)
+    full = _all_rows(prep, 200)
+    assert tested_row(prep, full) is None
+    i_pm = [name for name, _ in prep.rows].index(REFIT)
+    nominal = np.asarray(prep.rows[i_pm][1].idx) < len(prep.arrays.anchor)
+    bad = {k: v.copy() for k, v in full.items()}
+    bad["theta"][i_pm] = bad["theta"][i_pm] + 5.0
+    bad["sse_est"][i_pm] = 1e3 * full["sse_est"][i_pm]
+    bad["result"][i_pm] = 0
+    _, sse_val, _, best, lead = leading_rows(prep, bad)
+    k = min(best.values(), key=lambda k: sse_val[k])
+    assert tested_row(prep, bad) == k
+    starts = [it.theta0 for it in finishing_items(0, prep, bad) if it.row == i_pm]
+    want = [
+        np.where(nominal, bad["theta"][j], 0.0) for j in dict.fromkeys([*lead[:1], k])
+    ]
+    assert len(starts) == len(want)
+    for a, b in zip(starts, want, strict=True):
+        np.testing.assert_array_equal(a, b)
 
 
 @pytest.mark.slow

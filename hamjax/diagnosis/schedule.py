@@ -176,7 +176,7 @@ def finishing_items(c: int, prep: Prepared, fits: dict) -> list[Item]:
     ]
     restart = np.where(used, fits["theta"][lead[0]], 0.0)  # nominal part only
     out.append(Item(c, i_pm, restart, LAMBDA0, FINISH_STEPS, "finish", "lower"))
-    tested = tested_row(prep, fits)
+    tested = judged_row(prep, fits)
     if tested is not None and tested != lead[0]:
         start = np.where(used, fits["theta"][tested], 0.0)
         out.append(Item(c, i_pm, start, LAMBDA0, FINISH_STEPS, "finish", "lower"))
@@ -185,7 +185,7 @@ def finishing_items(c: int, prep: Prepared, fits: dict) -> list[Item]:
     return out
 
 
-def tested_row(prep: Prepared, fits: dict) -> int | None:
+def judged_row(prep: Prepared, fits: dict) -> int | None:
     """The structural row of least validation SSE (the class `attribute` tests
     against the re-fit) where the nested likelihood-ratio test finds it
     significant over the re-fit (`attribute.lr_over_refit`, at the threshold of

@@ -27,11 +27,11 @@ from hamjax.diagnosis.layout import N_MAX, prepare
 from hamjax.diagnosis.schedule import (
     REFIT,
     finishing_items,
+    judged_row,
     leading_rows,
     merge,
     run_batch,
     run_queue,
-    tested_row,
 )
 from hamjax.papers.gap.demo_cases import coloured_case, tiny_case
 
@@ -430,14 +430,14 @@ def test_refit_restarted_from_structural_row_leaves_a_local_minimum():
 @pytest.mark.slow
 def test_refit_restarted_from_the_row_the_decision_tests():
     # The re-fit is also restarted from the nominal part of the structural row
-    # of least validation error (`tested_row`), the one the nested
+    # of least validation error (`judged_row`), the one the nested
     # likelihood-ratio test will judge over it, where that test finds it
     # significant: never on a `none` case fitted to the end; on a re-fit stuck
     # far off, from that row, whichever class leads by estimation SSE.
     plant, dt, est, val = tiny_case(jr.key(8), "none", noise=1e-3)
     prep = prepare(plant, dt, est, val)
     full = _all_rows(prep, 200)
-    assert tested_row(prep, full) is None
+    assert judged_row(prep, full) is None
     i_pm = [name for name, _ in prep.rows].index(REFIT)
     nominal = np.asarray(prep.rows[i_pm][1].idx) < len(prep.arrays.anchor)
     bad = {k: v.copy() for k, v in full.items()}
@@ -446,7 +446,7 @@ def test_refit_restarted_from_the_row_the_decision_tests():
     bad["result"][i_pm] = 0
     _, sse_val, _, best, lead = leading_rows(prep, bad)
     k = min(best.values(), key=lambda k: sse_val[k])
-    assert tested_row(prep, bad) == k
+    assert judged_row(prep, bad) == k
     starts = [it.theta0 for it in finishing_items(0, prep, bad) if it.row == i_pm]
     want = [
         np.where(nominal, bad["theta"][j], 0.0) for j in dict.fromkeys([*lead[:1], k])

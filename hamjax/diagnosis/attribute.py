@@ -428,9 +428,10 @@ def _params(prep: Prepared, fit: dict, row: int, effect: str) -> dict:
 
 def lr_over_refit(
     prep: Prepared, sse: np.ndarray, i_pm: int, row: int, m: int
-) -> tuple[float, float]:
-    """`(lr, threshold)` of `_nested_lr` for row `row` over the re-fit row `i_pm`
-    (estimation SSEs `sse`), the threshold for `m` classes (its docstring)."""
+) -> tuple[float, float, int]:
+    """`(lr, threshold, k)` of `_nested_lr` for row `row` over the re-fit row
+    `i_pm` (estimation SSEs `sse`), the threshold for `m` classes and `k` the
+    slots `row` frees beyond the re-fit's (`n_beyond`; its docstring)."""
     k = n_beyond(prep, row, i_pm)
     p = n_fitted(prep, i_pm) + k
     s2 = sse[row] / max(prep.n_est - p, 1)
@@ -440,7 +441,7 @@ def lr_over_refit(
         from scipy.stats import chi2
 
         threshold = max(threshold, float(chi2.isf(LR_ALPHA / m, k)))
-    return lr, threshold
+    return lr, threshold, k
 
 
 def _nested_lr(
@@ -477,8 +478,7 @@ def _nested_lr(
     prediction-error fits' sums of squared one-step errors $A(q) r$ (the
     innovations, white under the noise model: the same $\\chi^2_k$) and `z` the
     validation $z$ of the two seen through $A$."""
-    k = n_beyond(prep, best.row, pm.row)
-    lr, threshold = lr_over_refit(prep, sse, pm.row, best.row, m)
+    lr, threshold, k = lr_over_refit(prep, sse, pm.row, best.row, m)
     if z is None:
         z = improvement_z(pm.residual, best.residual)
     return {

@@ -6,7 +6,8 @@ Gaussian predictive log-likelihood (`rule="likelihood"` of `diagnose_many`).
 (`parameter_mismatch`) or one effect's best row with the re-fit (lowest estimation
 SSE, `layout.best_row_per_class`), each fitted on the estimation record. On top of
 every $D$, each noise model $M$ of `noise_fit.NOISE_MODELS` (white, AR(1), AR(2),
-ARMA(1,1), a random-walk level) is fitted by prediction error on $D$'s own
+ARMA(1,1), a random-walk level, the flicker model ARFIMA(0, d, 0) of
+`effects/coloured_noise.py`) is fitted by prediction error on $D$'s own
 estimation residual (`noise_fit.fit_noise_family`), giving the one-step-ahead
 innovations $e_k$ of the pair $(D, M)$ on both records and the innovation variance
 $s^2_{D,M} = \sum_{est} e_k^2 / (n_{est} - p_D - p_M)$ ($p_D$, $p_M$ the
@@ -23,9 +24,9 @@ record, so it costs no test). The nominal keeps white (`none`), the level
 (`drift`) and its least-BIC coloured model (`coloured_noise`).
 
 **Levels**, simplest first: 0 (nominal, white) = `none`; 1 the nominal with a
-one-parameter noise model (AR(1) or the level); 2 with a two-parameter one
-(AR(2), ARMA(1,1): the level is ARMA(1,1) at its unit-root boundary, so a
-two-parameter model must earn its second parameter); 3 the re-fit
+one-parameter noise model (AR(1), the level or the flicker model); 2 with a
+two-parameter one (AR(2), ARMA(1,1): the level is ARMA(1,1) at its unit-root
+boundary, so a two-parameter model must earn its second parameter); 3 the re-fit
 (`parameter_mismatch`, any noise model); 4 a structural effect (each nests the
 re-fit). Within a level the pair of highest log-likelihood on both records
 (estimation at its fit plus validation; the siblings of a level are not nested,
@@ -113,6 +114,7 @@ NOISE_CLASS = {
     "ar2": "coloured_noise",
     "arma11": "coloured_noise",
     "level": "drift",
+    "fractional": "coloured_noise",
 }
 
 
@@ -191,6 +193,7 @@ def _noise_params(model: str, values: np.ndarray) -> dict:
         "ar2": ("ar2_a1", "ar2_a2"),
         "arma11": ("arma_a", "arma_c"),
         "level": ("level_gain",),
+        "fractional": ("fractional_d",),
     }[model]
     out = {
         n: {"value": float(v), "std": 0.0} for n, v in zip(names, values, strict=True)

@@ -2,8 +2,9 @@
 residual and score them by one-step-ahead prediction on the validation residual.
 
 `fit_noise_family` fits the whole family of noise models of the one-likelihood
-rule (`decide`): white, AR(1), AR(2), ARMA(1,1) and a local level (a random-walk
-level seen through its steady-state Kalman predictor), each by prediction error
+rule (`decide`): white, AR(1), AR(2), ARMA(1,1), a local level (a random-walk
+level seen through its steady-state Kalman predictor) and the flicker model
+ARFIMA(0, d, 0) (`effects/coloured_noise.py`), each by prediction error
 on one candidate's estimation residual, and returns the one-step-ahead
 innovations on both records.
 """
@@ -116,8 +117,10 @@ def noise_fit_numpy(r_est: np.ndarray, r_val: np.ndarray) -> dict:
     pv[: r_val.shape[0]] = r_val
     f = fit_noise_models(jnp.asarray(pe), jnp.asarray(me), jnp.asarray(pv))
     k = r_val.shape[0]
-    low = ("level_gain" if bool(f.coloured_is_level) else "ar1_pole",)
-    low = (*low, float(f.coloured_param))
+    low = (
+        "level_gain" if bool(f.coloured_is_level) else "ar1_pole",
+        float(f.coloured_param),
+    )
     drift = ("level_gain", float(f.level_alpha))
     if bool(f.is_fractional):
         stand_in = whitening_stand_in(
@@ -184,8 +187,15 @@ def predictor_errors(name: str, value: float, r: np.ndarray) -> np.ndarray:
 
 # The noise models of `fit_noise_family`, in its output order, and how many
 # parameters each fits (the degrees of freedom taken from its innovation variance).
-NOISE_MODELS = ("white", "ar1", "ar2", "arma11", "level")
-NOISE_PARAMETERS = {"white": 0, "ar1": 1, "ar2": 2, "arma11": 2, "level": 1}
+NOISE_MODELS = ("white", "ar1", "ar2", "arma11", "level", "fractional")
+NOISE_PARAMETERS = {
+    "white": 0,
+    "ar1": 1,
+    "ar2": 2,
+    "arma11": 2,
+    "level": 1,
+    "fractional": 1,
+}
 # The MA coefficient c of ARMA(1,1) is fitted on this grid (|c| < 1: invertible),
 # its AR pole by least squares given c.
 MA_GRID = 39
@@ -232,7 +242,7 @@ def _arma11(
     return a[k], cs[k]
 
 
-def _family_errors(r, a1, a2, arma, alpha):
+def _family_errors(r, a1, a2, arma, alpha, d):
     """One-step-ahead innovations of every model of `NOISE_MODELS` on `r`."""
     ar2 = r - a2[0] * _lagged(r, 1) - a2[1] * _lagged(r, 2)
     rt = _inverse_ma(r, arma[1])
@@ -243,6 +253,7 @@ def _family_errors(r, a1, a2, arma, alpha):
             ar2,
             rt - arma[0] * _lagged(rt, 1),
             local_level_errors(r, alpha),
+            fractional_errors(r, d),
         ]
     )
 
@@ -254,8 +265,9 @@ class NoiseFamily(eqx.Module):
     ar2: Float[Array, " 2"]
     arma11: Float[Array, " 2"]  # (a, c)
     level_alpha: Float[Array, ""]
-    e_est: Float[Array, "5 L"]  # innovations on the estimation record
-    e_val: Float[Array, "5 L"]  # and on the validation record
+    fractional_d: Float[Array, ""]  # ARFIMA(0, d, 0): the flicker model
+    e_est: Float[Array, "6 L"]  # innovations on the estimation record
+    e_val: Float[Array, "6 L"]  # and on the validation record
 
 
 @eqx.filter_jit
@@ -271,13 +283,15 @@ def fit_noise_family(
     a2 = _ar2(r_est, m_est)
     arma = jnp.stack(_arma11(r_est, m_est))
     alpha = fit_local_level(r_est, m_est)
+    d, _ = fit_fractional(r_est, m_est)
     return NoiseFamily(
         a1,
         a2,
         arma,
         alpha,
-        _family_errors(r_est, a1, a2, arma, alpha),
-        _family_errors(r_val, a1, a2, arma, alpha),
+        d,
+        _family_errors(r_est, a1, a2, arma, alpha, d),
+        _family_errors(r_val, a1, a2, arma, alpha, d),
     )
 
 
@@ -286,7 +300,7 @@ def noise_family_numpy(
 ) -> tuple[dict, np.ndarray, np.ndarray]:
     """`fit_noise_family` on unpadded NumPy residuals `(rows, n_est)` and
     `(rows, n_val)` (padded to the record buckets and to a multiple of 8 rows):
-    `(parameters per model, e_est (rows, 5, n_est), e_val (rows, 5, n_val))`."""
+    `(parameters per model, e_est (rows, 6, n_est), e_val (rows, 6, n_val))`."""
     rows, n_e = r_est.shape
     n_v = r_val.shape[1]
     n = bucket(max(n_e, n_v))
@@ -304,6 +318,7 @@ def noise_family_numpy(
         "ar2": np.asarray(f.ar2)[:rows],
         "arma11": np.asarray(f.arma11)[:rows],
         "level": np.asarray(f.level_alpha)[:rows, None],
+        "fractional": np.asarray(f.fractional_d)[:rows, None],
     }
     return (
         params,

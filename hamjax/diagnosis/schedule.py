@@ -59,7 +59,6 @@ from .layout import (
     Prepared,
     best_row_per_class,
     finite_sse,
-    n_beyond,
     refits_linear,
     starts_at_nominal_numerator,
     validation_sse,
@@ -162,7 +161,8 @@ def finishing_items(c: int, prep: Prepared, fits: dict) -> list[Item]:
       a fitted numerator (`layout.starts_at_nominal_numerator`: the stick-slip
       profile's), which is ranked and continued as any other.
     """
-    sse, _, i_pm, best, lead = leading_rows(prep, fits)
+    leading = leading_rows(prep, fits)
+    sse, _, i_pm, best, lead = leading
     used = np.asarray(prep.rows[i_pm][1].idx) < prep.arrays.anchor.shape[0]
     far = lambda r: refits_linear(r) and starts_at_nominal_numerator(r)  # noqa: E731
     budget = lambda k: (  # noqa: E731
@@ -174,28 +174,29 @@ def finishing_items(c: int, prep: Prepared, fits: dict) -> list[Item]:
         for k in dict.fromkeys([i_pm, *lead, *linear])
         if fits["result"][k] != SUCCESSFUL
     ]
-    restart = np.where(used, fits["theta"][lead[0]], 0.0)  # nominal part only
-    out.append(Item(c, i_pm, restart, LAMBDA0, FINISH_STEPS, "finish", "lower"))
-    tested = judged_row(prep, fits)
-    if tested is not None and tested != lead[0]:
-        start = np.where(used, fits["theta"][tested], 0.0)
+    judged = judged_row(prep, fits, leading=leading)
+    for k in dict.fromkeys([lead[0]] + ([] if judged is None else [judged])):
+        start = np.where(used, fits["theta"][k], 0.0)  # its nominal part only
         out.append(Item(c, i_pm, start, LAMBDA0, FINISH_STEPS, "finish", "lower"))
     back = np.where(used, 0.0, fits["theta"][lead[0]])  # effect part only
     out.append(Item(c, lead[0], back, LAMBDA0, FINISH_STEPS, "finish", "lower"))
     return out
 
 
-def judged_row(prep: Prepared, fits: dict) -> int | None:
+def judged_row(
+    prep: Prepared, fits: dict, *, leading: tuple | None = None
+) -> int | None:
     """The structural row of least validation SSE (the class `attribute` tests
     against the re-fit) where the nested likelihood-ratio test finds it
     significant over the re-fit (`attribute.lr_over_refit`, at the threshold of
-    the case's structural classes); None otherwise."""
-    sse, sse_val, i_pm, best, _ = leading_rows(prep, fits)
+    the case's structural classes); None otherwise. `leading`: `leading_rows`
+    of these fits, where the caller has it."""
+    sse, sse_val, i_pm, best, _ = leading or leading_rows(prep, fits)
     if not best:
         return None
     k = min(best.values(), key=lambda k: sse_val[k])
-    lr, threshold = lr_over_refit(prep, sse, i_pm, k, len(best))
-    if n_beyond(prep, k, i_pm) > 0 and np.isfinite(lr) and lr > threshold:
+    lr, threshold, beyond = lr_over_refit(prep, sse, i_pm, k, len(best))
+    if beyond > 0 and np.isfinite(lr) and lr > threshold:
         return k
     return None
 

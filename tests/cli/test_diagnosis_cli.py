@@ -9,7 +9,7 @@ import pytest
 from hamjax.cli.main import main
 from hamjax.diagnosis.attribute import DETERMINISTIC_NAMES, NOISE_NAMES
 from hamjax.io import model_to_dict, write_csv, write_json
-from hamjax.papers.gap.blind import make_case, score
+from hamjax.papers.gap.blind import format_score, make_case, score
 from hamjax.papers.gap.demo_cases import tiny_case
 
 
@@ -131,6 +131,18 @@ def test_blind_realistic_draws_and_score_arithmetic():
     assert s["false_alarm_none"] == 0.5
     assert np.isclose(s["median_shrink_deterministic"], np.median([0.75, 1.0]))
     assert s["confusion"]["backlash"]["dead_zone"] == 1
+    assert s["accuracy_by_excitation"] == {}  # the truth records no excitation
+    # by each record's excitation (family B's truth): c right, d wrong
+    truth["cases"]["c"]["excitation"] = {"estimation": "prbs", "validation": "prbs"}
+    truth["cases"]["d"]["excitation"] = {"estimation": "prbs", "validation": "x"}
+    s = score(truth, named)
+    assert s["accuracy_by_excitation"] == {
+        "estimation": {"prbs": [1, 2]},
+        "validation": {"prbs": [1, 1], "x": [0, 1]},
+    }
+    text = format_score(s)
+    assert "accuracy by estimation excitation: prbs 0.500 (1/2)" in text
+    assert "accuracy by validation excitation: prbs 1.000 (1/1), x 0.000 (0/1)" in text
 
 
 @pytest.mark.slow

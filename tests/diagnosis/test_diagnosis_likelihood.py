@@ -75,6 +75,31 @@ def test_each_noise_model_recovered_on_noise_only_records():
     )
 
 
+@pytest.mark.statistical
+def test_the_flicker_model_recovered_on_a_fractional_record():
+    # ARFIMA(0, d, 0) built from its MA(infinity) weights psi_k = psi_{k-1}
+    # (k - 1 + d) / k (`effects/coloured_noise.py` inverts them: no shared
+    # formula), d = 0.4. Tolerance: 5 asymptotic standard errors of d,
+    # sqrt(6 / (pi^2 n)) (Whittle), plus half the fitted grid's step of 1/20;
+    # the innovation variance as above, plus the truncation of the weights at
+    # the record's start, which the variance test's 5 sd covers at n = N
+    d, n = 0.4, 2 * N
+    k = np.arange(1, n)
+    psi = np.concatenate([[1.0], np.cumprod((k - 1 + d) / k)])
+    e = SIGMA * np.asarray(jr.normal(jr.key(5), (n,)))
+    r = scipy.signal.oaconvolve(e, psi)[:n]
+    fitted, e_est, e_val = _fit(r)
+    assert abs(fitted["fractional"][0] - d) < 5 * np.sqrt(6 / (np.pi**2 * N)) + 0.025
+    j = NOISE_MODELS.index("fractional")
+    tol_var = 5 * SIGMA**2 * np.sqrt(2 / N)
+    assert abs(np.mean(e_est[j] ** 2) - SIGMA**2) < tol_var
+    assert abs(np.mean(e_val[j] ** 2) - SIGMA**2) < tol_var
+    # and of the one-parameter models it leaves the least SSE (AR(1) and the
+    # level follow a power-law memory only in part)
+    for m in ("ar1", "level"):
+        assert np.mean(e_est[j] ** 2) < np.mean(e_est[NOISE_MODELS.index(m)] ** 2), m
+
+
 def _random_walk_case(key, n=400, std=0.003):
     case = tiny_case(key, "none", n=n, noise=0.01)
     for i, rec in enumerate(case[2:]):

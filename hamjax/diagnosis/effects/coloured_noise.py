@@ -1,14 +1,14 @@
 """`coloured_noise`: $y = w + e'$ with $e'$ coloured, seen through prediction.
 
-An AR(1) process: $e'_k = a e'_{k-1} + \\varepsilon_k$; the one-step-ahead predictor of the residual is
-$a r_{k-1}$, so the gap is the RMS of $r_k - a r_{k-1}$. $a = 0$ is neutral (white
-noise, predictor 0).
+An AR(1) process: $e'_k = a e'_{k-1} + \\varepsilon_k$; the one-step-ahead
+predictor of the residual is $a r_{k-1}$, so the gap is the RMS of
+$r_k - a r_{k-1}$. $a = 0$ is neutral (white noise, predictor 0).
 
 Coloured noise off the AR(1) form (ARMA, flicker) is often predicted better by a
 local level of high gain $\\alpha > 1/2$, whose innovations are mostly coloured
 (`effects/drift.py` derives the white share $1 - \\alpha$); that predictor is this
-class's too, and `noise_fit.fit_noise_models` takes whichever of the two fits the
-estimation record better.
+class's too, and `noise_fit.fit_noise_models` takes whichever of the class's
+predictors (these two and the flicker one below) fits the estimation record best.
 
 **Flicker noise.** A $1/f^\\beta$ spectrum (flicker, $\\beta$ near 1: resistors,
 semiconductor sensors, many drifts of electronics) is neither: its memory decays

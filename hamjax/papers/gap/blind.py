@@ -635,6 +635,10 @@ def score(
 ) -> dict:
     """Confusion matrix, accuracy, false alarm on `none`, median shrink, and with
     `confidences` the calibration of the probability of the named effect.
+    `accuracy_by_excitation`: where the truth records each case's excitations
+    (family B's `excitation`), `{record: {kind: [right, cases]}}` for the
+    estimation and the validation record (an input of two levels, a PRBS,
+    shows a static map at two points only: the diagnosis is read by it).
 
     **Arguments:** `truth` as in `truth.json`; `named` maps case name -> effect
     named; `shrinks` maps case name -> `(gap_before, gap_after)` (the shrink is
@@ -646,6 +650,7 @@ def score(
     correct, total, none_total, none_alarm = 0, 0, 0, 0
     shrink_values = []
     missing = []
+    by_excitation: dict[str, dict[str, list[int]]] = {}
     for name, tr in truth["cases"].items():
         if name not in named:
             missing.append(name)
@@ -654,6 +659,10 @@ def score(
         matrix[t][p if p in labels else "unexplained"] += 1
         total += 1
         correct += t == p
+        for record, kind in (tr.get("excitation") or {}).items():
+            c = by_excitation.setdefault(record, {}).setdefault(str(kind), [0, 0])
+            c[0] += t == p
+            c[1] += 1
         if t == "none":
             none_total += 1
             none_alarm += p != "none"
@@ -682,6 +691,9 @@ def score(
         if shrink_values
         else float("nan"),
         "confusion": matrix,
+        "accuracy_by_excitation": {
+            r: dict(sorted(c.items())) for r, c in by_excitation.items()
+        },
         "stiction": stiction_score(truth, named)
         if truth.get("family") == "loops"
         else None,
@@ -781,6 +793,11 @@ def format_score(s: dict) -> str:
                 for b in s["calibration"]["bins"]
             )
             + ")"
+        )
+    for record, counts in s.get("accuracy_by_excitation", {}).items():
+        lines.append(
+            f"accuracy by {record} excitation: "
+            + ", ".join(f"{k} {h / n:.3f} ({h}/{n})" for k, (h, n) in counts.items())
         )
     if s.get("stiction"):
         st = s["stiction"]

@@ -637,8 +637,8 @@ def score(
     `confidences` the calibration of the probability of the named effect.
     `accuracy_by_excitation`: where the truth records each case's excitations
     (family B's `excitation`), `{record: {kind: [right, cases]}}` for the
-    estimation and the validation record (an input of two levels, a PRBS,
-    shows a static map at two points only: the diagnosis is read by it).
+    estimation and the validation record; split so because an input of two
+    levels (a PRBS) shows a static map at two points only.
 
     **Arguments:** `truth` as in `truth.json`; `named` maps case name -> effect
     named; `shrinks` maps case name -> `(gap_before, gap_after)` (the shrink is

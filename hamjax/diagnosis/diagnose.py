@@ -221,6 +221,7 @@ def _result(prep, att: Attribution, val: dict) -> GapDiagnosis:
         att.noise_floor,
         prep.ctx.dt,
         y=val["y"],
+        v_est=np.asarray(prep.arrays.v_est)[: prep.n_est],
     )
     tried = _tried(att)
     mse = {k: v[0] for k, v in tried.items()}

@@ -197,22 +197,46 @@ def _axes(t, v, r, u, floor, dt) -> dict:
     return out
 
 
-def locate(t, v, r_before, r_after, u, floor, dt, *, y=None) -> dict:
+# input levels counted up to this many (`input_levels`): past two, a static map
+# is seen at more points than a gain and an offset can fit
+LEVELS_COUNTED = 3
+
+
+def input_levels(v: np.ndarray) -> int:
+    """How many distinct values the input `v` takes, to rounding ($10^{-9}$ of
+    its range), counted up to `LEVELS_COUNTED`. On two levels (a PRBS, a step
+    test) a static map of the input is seen at two points, where any map is a
+    gain and an offset."""
+    v = np.asarray(v, float)
+    span = float(np.ptp(v)) if v.size else 0.0
+    if span == 0.0:
+        return 1
+    levels = np.unique(np.round((v - v.min()) / (1e-9 * span)))
+    return int(min(levels.size, LEVELS_COUNTED))
+
+
+def locate(t, v, r_before, r_after, u, floor, dt, *, y=None, v_est=None) -> dict:
     """The `where` block of diagnosis.json: every axis for the residual of the
     nominal model (`before`) and of the augmented model (`after`), and whether
     the record looks closed-loop: `residuals.feedback_test` on the measured
     output `y`, as the gate of the candidate layout tests it
     (`layout.looks_closed_loop`): a model's residual is not a function of past
     inputs alone when the model has a direct feedthrough, and its level would
-    depend on the model being right. Without `y` the test is not run."""
+    depend on the model being right. Without `y` the test is not run.
+    `input_levels`: `input_levels` of this (validation) record's input and, given
+    `v_est`, of the estimation record's."""
     t, v, u = (np.asarray(x, float) for x in (t, v, u))
     if y is None:
         feedback = {"applicable": False, "why": "the measured output was not given"}
     else:
         feedback = feedback_test(np.asarray(y, float), v)
+    levels = {"validation": input_levels(v)}
+    if v_est is not None:
+        levels = {"estimation": input_levels(v_est)} | levels
     return {
         "noise_floor": float(floor),
         "feedback": feedback,
+        "input_levels": levels,
         "before": _axes(t, v, np.asarray(r_before, float), u, floor, dt),
         "after": _axes(t, v, np.asarray(r_after, float), u, floor, dt),
     }

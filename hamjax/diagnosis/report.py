@@ -147,6 +147,15 @@ def report_markdown(d, name: str = "case", nominal: str | None = None) -> str:
             "apart on these records: their validation errors are within the "
             "evidence of a few samples (see the candidates below)"
         )
+    two = [r for r, k in d.where.get("input_levels", {}).items() if k <= 2]
+    if two:
+        lines.append(
+            f"- the {' and the '.join(two)} record's input takes at most two "
+            "levels: a static map of the input is seen there at two points, where "
+            "any map is a gain and an offset, so on that record a static effect "
+            "on the input (`saturation`, `dead_zone`, `preload`) cannot be told "
+            "apart from a gain mismatch (`parameter_mismatch`)"
+        )
     if nominal is not None:
         lines.append(f"- nominal model: {nominal}")
     ref = d.tests.get("reference", {})

@@ -1,0 +1,62 @@
+"""`locate`'s input levels and what the report says of a two-level record."""
+
+from types import SimpleNamespace
+
+import numpy as np
+
+from hamjax.diagnosis.locate import LEVELS_COUNTED, input_levels, locate
+from hamjax.diagnosis.report import report_markdown
+
+
+def test_input_levels_counts_distinct_values_to_rounding():
+    rng = np.random.default_rng(3)
+    prbs = np.repeat(rng.choice([-1.7, 1.7], 50), 7)
+    assert input_levels(prbs) == 2
+    # rounding far below the range (a CSV's last digit) is one level
+    assert input_levels(prbs + 1e-13 * rng.standard_normal(prbs.shape)) == 2
+    assert input_levels(np.full(40, 0.3)) == 1
+    assert input_levels(np.repeat([0.0, 1.0, 2.0], 10)) == 3
+    multisine = np.sin(0.1 * np.arange(500)) + 0.5 * np.sin(0.37 * np.arange(500))
+    assert input_levels(multisine) == LEVELS_COUNTED
+
+
+def _diagnosis(v_est, v_val):
+    rng = np.random.default_rng(4)
+    n = v_val.shape[0]
+    r = 0.1 * rng.standard_normal(n)
+    t = np.arange(n) * 0.01
+    where = locate(t, v_val, r, r, v_val, 0.1, 0.01, v_est=v_est)
+    return SimpleNamespace(
+        effect="saturation",
+        probabilities={"saturation": 0.6, "parameter_mismatch": 0.4},
+        tests={},
+        where=where,
+        gap_before=0.3,
+        gap_after=0.1,
+        noise_floor=0.1,
+        shrink=1.0,
+        gap_definition="simulation error",
+        ranking=[
+            {
+                "effect": "saturation",
+                "gap_after": 0.1,
+                "measure": "simulation",
+                "params": {},
+            }
+        ],
+    )
+
+
+def test_the_report_says_when_a_record_has_two_input_levels():
+    rng = np.random.default_rng(5)
+    prbs = np.repeat(rng.choice([-1.0, 1.0], 80), 5)
+    noise = rng.standard_normal(400)
+    d = _diagnosis(prbs, noise)
+    assert d.where["input_levels"] == {"estimation": 2, "validation": LEVELS_COUNTED}
+    text = report_markdown(d)
+    assert "the estimation record's input takes at most two levels" in text
+    assert "cannot be told apart from a gain mismatch" in text
+    both = report_markdown(_diagnosis(prbs, prbs))
+    assert "the estimation and the validation record's input" in both
+    # a record of many levels on both sides: nothing said
+    assert "at most two levels" not in report_markdown(_diagnosis(noise, noise))

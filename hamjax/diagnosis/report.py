@@ -149,12 +149,17 @@ def report_markdown(d, name: str = "case", nominal: str | None = None) -> str:
         )
     two = [r for r, k in d.where.get("input_levels", {}).items() if k <= 2]
     if two:
+        which, there = (
+            ("the inputs of both records take", "those records")
+            if len(two) == 2
+            else (f"the {two[0]} record's input takes", "that record")
+        )
         lines.append(
-            f"- the {' and the '.join(two)} record's input takes at most two "
-            "levels: a static map of the input is seen there at two points, where "
-            "any map is a gain and an offset, so on that record a static effect "
-            "on the input (`saturation`, `dead_zone`, `preload`) cannot be told "
-            "apart from a gain mismatch (`parameter_mismatch`)"
+            f"- {which} at most two levels: a static map of the input is seen "
+            "there at two points, where any map is a gain and an offset, so on "
+            f"{there} a static effect on the input (`saturation`, `dead_zone`, "
+            "`preload`) cannot be told apart from a gain mismatch "
+            "(`parameter_mismatch`)"
         )
     if nominal is not None:
         lines.append(f"- nominal model: {nominal}")

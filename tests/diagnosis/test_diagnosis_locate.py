@@ -55,8 +55,12 @@ def test_the_report_says_when_a_record_has_two_input_levels():
     assert d.where["input_levels"] == {"estimation": 2, "validation": LEVELS_COUNTED}
     text = report_markdown(d)
     assert "the estimation record's input takes at most two levels" in text
+    assert "on that record a static effect on the input" in text
     assert "cannot be told apart from a gain mismatch" in text
+    one = report_markdown(_diagnosis(noise, prbs))
+    assert "the validation record's input takes at most two levels" in one
     both = report_markdown(_diagnosis(prbs, prbs))
-    assert "the estimation and the validation record's input" in both
+    assert "the inputs of both records take at most two levels" in both
+    assert "on those records a static effect" in both
     # a record of many levels on both sides: nothing said
     assert "at most two levels" not in report_markdown(_diagnosis(noise, noise))

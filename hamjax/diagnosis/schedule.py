@@ -175,7 +175,7 @@ def finishing_items(c: int, prep: Prepared, fits: dict) -> list[Item]:
         if fits["result"][k] != SUCCESSFUL
     ]
     judged = judged_row(prep, fits, leading=leading)
-    for k in dict.fromkeys([lead[0]] + ([] if judged is None else [judged])):
+    for k in dict.fromkeys(k for k in (lead[0], judged) if k is not None):
         start = np.where(used, fits["theta"][k], 0.0)  # its nominal part only
         out.append(Item(c, i_pm, start, LAMBDA0, FINISH_STEPS, "finish", "lower"))
     back = np.where(used, 0.0, fits["theta"][lead[0]])  # effect part only

@@ -660,9 +660,7 @@ def score(
         total += 1
         correct += t == p
         for record, kind in (tr.get("excitation") or {}).items():
-            c = by_excitation.setdefault(record, {}).setdefault(str(kind), [0, 0])
-            c[0] += t == p
-            c[1] += 1
+            _tally(by_excitation.setdefault(record, {}), str(kind), t == p)
         if t == "none":
             none_total += 1
             none_alarm += p != "none"
@@ -698,6 +696,18 @@ def score(
         if truth.get("family") == "loops"
         else None,
     }
+
+
+def _tally(counts: dict[str, list[int]], key: str, hit: bool) -> None:
+    """One case more under `key` of `counts` (`{key: [hits, cases]}`)."""
+    c = counts.setdefault(key, [0, 0])
+    c[0] += hit
+    c[1] += 1
+
+
+def _rates(counts: dict[str, list[int]]) -> str:
+    """`counts` (`{key: [hits, cases]}`) as "key rate (hits/cases), ..."."""
+    return ", ".join(f"{k} {h / n:.3f} ({h}/{n})" for k, (h, n) in counts.items())
 
 
 # the bands of a loop's valve visibility (`control_loops.valve_visibility`) its
@@ -749,9 +759,7 @@ def stiction_score(truth: dict, named: dict) -> dict:
                     value = tr[field]
                     if field == "valve_visibility":
                         value = visibility_band(value)
-                    c = counts.setdefault(str(value or "none"), [0, 0])
-                    c[0] += named[name] in STICTION_LIKE
-                    c[1] += 1
+                    _tally(counts, str(value or "none"), named[name] in STICTION_LIKE)
         else:
             n_free += 1
             alarm += named[name] in STICTION_LIKE
@@ -795,10 +803,7 @@ def format_score(s: dict) -> str:
             + ")"
         )
     for record, counts in s.get("accuracy_by_excitation", {}).items():
-        lines.append(
-            f"accuracy by {record} excitation: "
-            + ", ".join(f"{k} {h / n:.3f} ({h}/{n})" for k, (h, n) in counts.items())
-        )
+        lines.append(f"accuracy by {record} excitation: " + _rates(counts))
     if s.get("stiction"):
         st = s["stiction"]
         lines.append(
@@ -809,12 +814,7 @@ def format_score(s: dict) -> str:
             f"{st['balanced_accuracy']:.3f}"
         )
         for field, counts in st.get("recall_by", {}).items():
-            lines.append(
-                f"stiction recall by {field}: "
-                + ", ".join(
-                    f"{k} {h / n:.3f} ({h}/{n})" for k, (h, n) in counts.items()
-                )
-            )
+            lines.append(f"stiction recall by {field}: " + _rates(counts))
     if s["missing"]:
         lines.append(f"missing results: {len(s['missing'])}")
     return "\n".join(lines)

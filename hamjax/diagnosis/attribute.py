@@ -242,6 +242,7 @@ import functools as ft
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.stats import chi2
 
 from .augmented import EFFECT_SLOTS, NL_PIECEWISE, slot_names
 from .effects.extra_pole import lag_samples
@@ -438,8 +439,6 @@ def lr_over_refit(
     lr = float((sse[i_pm] - sse[row]) / s2) if s2 > 0 else 0.0
     threshold = 2.0 * np.log(m / LR_ALPHA)
     if k > 2:
-        from scipy.stats import chi2
-
         threshold = max(threshold, float(chi2.isf(LR_ALPHA / m, k)))
     return lr, threshold, k
 

@@ -154,9 +154,11 @@ def report_markdown(d, name: str = "case", nominal: str | None = None) -> str:
             if len(two) == 2
             else (f"the {two[0]} record's input takes", "that record")
         )
+        levels = max(d.where["input_levels"][r] for r in two)
+        points = "one point" if levels < 2 else "two points"
         lines.append(
             f"- {which} at most two levels: a static map of the input is seen "
-            "there at two points, where any map is a gain and an offset, so on "
+            f"there at {points}, where any map is a gain and an offset, so on "
             f"{there} a static effect on the input (`saturation`, `dead_zone`, "
             "`preload`) cannot be told apart from a gain mismatch "
             "(`parameter_mismatch`)"

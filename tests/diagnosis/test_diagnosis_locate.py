@@ -62,5 +62,9 @@ def test_the_report_says_when_a_record_has_two_input_levels():
     both = report_markdown(_diagnosis(prbs, prbs))
     assert "the inputs of both records take at most two levels" in both
     assert "on those records a static effect" in both
+    assert "seen there at two points" in both
+    # a constant input is one level: the map is seen at one point
+    flat = report_markdown(_diagnosis(np.full(400, 0.5), noise))
+    assert "seen there at one point" in flat
     # a record of many levels on both sides: nothing said
     assert "at most two levels" not in report_markdown(_diagnosis(noise, noise))

@@ -48,6 +48,13 @@ def register(sub) -> None:
         help="family B only: the 14 classes (default) or the 12 of its first version "
         "(no friction, no feedback nonlinearity: its sets exactly)",
     )
+    m.add_argument(
+        "--estimation-input",
+        choices=("default", "prbs"),
+        default=None,
+        help="family A only: prbs makes every case's estimation input a +-1 PRBS "
+        "(two levels; every other draw as in the default set, docs/family-b.md)",
+    )
     m.add_argument("--out", type=Path, required=True)
     m.add_argument(
         "--force",
@@ -88,6 +95,8 @@ def run_make(args: argparse.Namespace) -> int:
         )
     if args.family != "B" and args.classes is not None:
         raise UserInputError("--classes applies to family B only")
+    if args.family != "A" and args.estimation_input is not None:
+        raise UserInputError("--estimation-input applies to family A only")
     earlier = _check_make_out(args.out, args.force)
     remove_files(earlier, args.out)
     if args.family == "B":
@@ -108,8 +117,16 @@ def run_make(args: argparse.Namespace) -> int:
         from ..papers.gap.blind import make_cases
 
         realism = args.realism or "exact"
-        truth = make_cases(jr.key(args.seed), args.cases, args.out, realism=realism)
-        print(f"wrote {len(truth['cases'])} {realism} cases to {args.out / 'cases'}")
+        estimation = args.estimation_input or "default"
+        truth = make_cases(
+            jr.key(args.seed),
+            args.cases,
+            args.out,
+            realism=realism,
+            estimation=estimation,
+        )
+        kind = realism if estimation == "default" else f"{realism} PRBS-estimation"
+        print(f"wrote {len(truth['cases'])} {kind} cases to {args.out / 'cases'}")
     print(f"diagnose them with: hamjax diagnose {args.out / 'cases'}/* --out RESULTS")
     return 0
 

@@ -229,6 +229,14 @@ def test_blind_make_into_a_non_empty_folder_needs_force(tmp_path, capsys):
     ]
 
 
+def test_blind_make_refuses_a_family_a_option_for_family_b(tmp_path, capsys):
+    bench = tmp_path / "bench"
+    args = ["blind", "make", "--cases", 1, "--family", "B", "--out", bench]
+    code, _, err = _main([*args, "--estimation-input", "prbs"], capsys)
+    assert code == 2 and "applies to family A only" in _one_error_line(err)
+    assert not bench.exists()
+
+
 def _fake_results(bench: Path, res: Path, names) -> None:
     for name in names:
         (res / name).mkdir(parents=True)

@@ -21,6 +21,12 @@ Modes:
   part on a cubic stiffness, an asymmetric clearance); effect RMS from 0.3 x the
   noise std up; records of 1000-4000 samples.
 
+`estimation="prbs"` replaces every case's estimation input by a +-1 PRBS (a
+random clock of 3-40 samples, `_prbs`, from a key of its own, so every other
+draw of the case is as in the default set): the records of two levels on which
+family B loses most to family A, made on family A to measure that loss apart
+from the family (docs/family-b.md, *Two-level records*).
+
 `friction` and `feedback_nonlinearity` (a force fed back from the output to the
 input of the linear block, simulated in one loop, `_lsim_loop`) replace a case's
 class with probability 2/14 from a key of their own (`FIRST_DRAW`): the other
@@ -59,6 +65,8 @@ TRUTH_CLASSES = tuple(c for c in CONTRACT_CLASSES if c != "unexplained")
 FEEDBACK_EFFECTS = ("friction", "feedback_nonlinearity")
 FIRST_DRAW = tuple(e for e in EFFECTS if e not in FEEDBACK_EFFECTS)
 _FEEDBACK_KEY = 611953  # folded into a case's key for the replacement draw
+_PRBS_KEY = 524287  # folded into a case's key for `estimation="prbs"`
+ESTIMATION_INPUTS = ("default", "prbs")
 
 
 class _Draw:
@@ -239,6 +247,15 @@ def _excitation(d: _Draw, n: int, dt: float) -> np.ndarray:
     return v / np.max(np.abs(v))
 
 
+def _prbs(key, n: int) -> np.ndarray:
+    """A +-1 pseudo-random binary sequence of `n` samples: random signs held for
+    a clock of 3-40 samples, drawn from `key` alone."""
+    k_clock, k_bits = jr.split(key)
+    clock = int(jr.randint(k_clock, (), 3, 41))
+    bits = np.asarray(jr.bernoulli(k_bits, 0.5, (n // clock + 1,)))
+    return np.repeat(np.where(bits, 1.0, -1.0), clock)[:n]
+
+
 # ---------------------------------------------------------------- effects ----
 
 
@@ -391,8 +408,9 @@ def _rms(x):
     return float(np.sqrt(np.mean(np.square(x))))
 
 
-def make_case(key, *, realism: str = "exact") -> dict:
-    """One withheld-effect case.
+def make_case(key, *, realism: str = "exact", estimation: str = "default") -> dict:
+    """One withheld-effect case. `estimation`: `"default"`, or `"prbs"` for a
+    +-1 PRBS estimation input (module docstring).
 
     An effect that does not show in both records (say an output saturation the
     validation output never reaches) is no effect at all: it is drawn again, from
@@ -403,16 +421,22 @@ def make_case(key, *, realism: str = "exact") -> dict:
     """
     if realism not in ("exact", "realistic"):
         raise ValueError(f"realism must be 'exact' or 'realistic'; got {realism!r}")
+    if estimation not in ESTIMATION_INPUTS:
+        raise ValueError(
+            f"estimation must be one of {ESTIMATION_INPUTS}; got {estimation!r}"
+        )
     for attempt in range(100):
         case = _draw_case(
-            key if attempt == 0 else jr.fold_in(key, 104729 + attempt), realism
+            key if attempt == 0 else jr.fold_in(key, 104729 + attempt),
+            realism,
+            estimation,
         )
         if case is not None:
             return case
     raise RuntimeError("no visible effect in 100 draws")  # pragma: no cover
 
 
-def _draw_case(key, realism: str) -> dict | None:
+def _draw_case(key, realism: str, estimation: str = "default") -> dict | None:
     realistic = realism == "realistic"
     d = _Draw(key)
     dt = 0.05
@@ -435,6 +459,8 @@ def _draw_case(key, realism: str) -> dict | None:
         hold = d.integer(20, 60)
         v_est = np.repeat(d.uniform_array((n // hold + 1,), -1, 1), hold)[:n]
         v_val = np.repeat(d.uniform_array((n // hold + 1,), -1, 1), hold)[:n]
+    if estimation == "prbs":
+        v_est = _prbs(jr.fold_in(key, _PRBS_KEY), n)
     w_nom_est = _lsim(nominal.linear, _static(nominal.nonlinearity, v_est), dt)
     u_est = _static(nominal.nonlinearity, v_est)
     W = max(np.quantile(np.abs(w_nom_est), 0.98), 1e-9)
@@ -584,17 +610,23 @@ def _draw_case(key, realism: str) -> dict | None:
             "effect_rms_over_noise": float(effect_rms / sigma) if sigma > 0 else 0.0,
             "n_samples": n,
             "realism": realism,
+            **({"excitation": {"estimation": "prbs"}} if estimation == "prbs" else {}),
         },
     }
 
 
-def make_cases(key, n_cases: int, out: Path, *, realism: str = "exact") -> dict:
-    """Write `n_cases` case folders under `out` and `out/truth.json`."""
+def make_cases(
+    key, n_cases: int, out: Path, *, realism: str = "exact", estimation: str = "default"
+) -> dict:
+    """Write `n_cases` case folders under `out` and `out/truth.json` (`realism`,
+    `estimation`: as in `make_case`)."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     truth = {"realism": realism, "cases": {}}
+    if estimation != "default":
+        truth["estimation"] = estimation
     for i in range(n_cases):
-        case = make_case(jr.fold_in(key, i), realism=realism)
+        case = make_case(jr.fold_in(key, i), realism=realism, estimation=estimation)
         truth["cases"][write_case(out, i, case)] = case["truth"]
     write_json(out / "truth.json", truth)
     return truth

@@ -147,15 +147,14 @@ def report_markdown(d, name: str = "case", nominal: str | None = None) -> str:
             "apart on these records: their validation errors are within the "
             "evidence of a few samples (see the candidates below)"
         )
-    two = [r for r, k in d.where.get("input_levels", {}).items() if k <= 2]
+    two = {r: k for r, k in d.where.get("input_levels", {}).items() if k <= 2}
     if two:
         which, there = (
             ("the inputs of both records take", "those records")
             if len(two) == 2
-            else (f"the {two[0]} record's input takes", "that record")
+            else (f"the {next(iter(two))} record's input takes", "that record")
         )
-        levels = max(d.where["input_levels"][r] for r in two)
-        points = "one point" if levels < 2 else "two points"
+        points = "one point" if max(two.values()) < 2 else "two points"
         lines.append(
             f"- {which} at most two levels: a static map of the input is seen "
             f"there at {points}, where any map is a gain and an offset, so on "

@@ -51,6 +51,7 @@ from ...models import (
     Tabulated,
 )
 from ...models.nonlinearities.piecewise_linear import piecewise_linear_map
+from ...signals import prbs
 
 
 # The contract's names: none, the deterministic effects, the noise ones.
@@ -248,12 +249,11 @@ def _excitation(d: _Draw, n: int, dt: float) -> np.ndarray:
 
 
 def _prbs(key, n: int) -> np.ndarray:
-    """A +-1 pseudo-random binary sequence of `n` samples: random signs held for
-    a clock of 3-40 samples, drawn from `key` alone."""
+    """`signals.prbs` of `n` samples, +-1, with a clock of 3-40 samples drawn
+    from `key` too."""
     k_clock, k_bits = jr.split(key)
     clock = int(jr.randint(k_clock, (), 3, 41))
-    bits = np.asarray(jr.bernoulli(k_bits, 0.5, (n // clock + 1,)))
-    return np.repeat(np.where(bits, 1.0, -1.0), clock)[:n]
+    return np.asarray(prbs(k_bits, n_samples=n, hold=clock)[1])
 
 
 # ---------------------------------------------------------------- effects ----

@@ -7,10 +7,12 @@ report their calibration on another that was never used to choose them.
 
 Each `NAME=SET:RESULTS` pairs a blind set (`hamjax blind make`: `truth.json`,
 `cases/`) with the folder `hamjax diagnose SET/cases/* --out RESULTS` wrote.
-From each `diagnosis.json` it reads the named effect, every candidate's
-validation gap (`ranking`), `gap_before` (the `none` candidate) and the evidence's
-effective sample size (`tests.evidence`), so the features are exactly those of
-`probabilities.evidence` and `probabilities.verdict_kind`.
+From each `diagnosis.json` it reads the named effect and, from `tests.evidence`,
+every class's validation mean square that `probabilities` read (`mse`; named a
+noise model, the deterministic candidates seen through its predictor) and the
+evidence's effective sample size, so the features are exactly those of
+`probabilities.evidence` and `probabilities.verdict_kind`. (A diagnosis written
+before `mse` was recorded gives the ranked gaps and `gap_before` instead.)
 
 Fitted on the training sets only, by maximum likelihood with a 1e-3 ridge:
 the slope of the evidence and one offset per verdict kind (whether the named
@@ -54,12 +56,15 @@ def load(cases: Path, results: Path) -> list[dict]:
         if not path.is_file():
             continue
         d = json.loads(path.read_text())
-        mse = {"none": _square(d["gap_before"])}
-        for c in d["ranking"]:
-            mse[c["effect"]] = min(
-                mse.get(c["effect"], math.inf), _square(c["gap_after"])
-            )
         ev = d["tests"]["evidence"]
+        if "mse" in ev:  # what `probabilities` read (null: infinite)
+            mse = {k: math.inf if v is None else v for k, v in ev["mse"].items()}
+        else:  # a diagnosis written before 2026-12-06: the ranked gaps
+            mse = {"none": _square(d["gap_before"])}
+            for c in d["ranking"]:
+                mse[c["effect"]] = min(
+                    mse.get(c["effect"], math.inf), _square(c["gap_after"])
+                )
         rows.append(
             {
                 "truth": t["effect"],

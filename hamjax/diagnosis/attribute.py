@@ -312,6 +312,9 @@ class Attribution:
     # hamjax's own fitted nominal (`reference`)
     reference: str = "nominal"
     fitted: bool = False  # the nominal is hamjax's own fit (no model.json)
+    # each deterministic class as the tests through the noise predictor judge it:
+    # its prediction-error fit where one was made, else its output-error fit
+    whitened: dict = field(default_factory=dict)
 
 
 def rms(x: np.ndarray) -> float:
@@ -345,6 +348,8 @@ def attribution(
     cands: list,
     tests: dict,
     gap: tuple,
+    *,
+    whitened: dict | None = None,
 ) -> Attribution:
     """The `Attribution` of case `prep`, candidates ranked by gap after the named
     one; `gap` as `gaps` returns it; the reference as `tests["reference"]` says
@@ -366,6 +371,7 @@ def attribution(
         y_nominal=prep.w_val,
         reference=tests.get("reference", {}).get("model", "nominal"),
         fitted=prep.fitted,
+        whitened=whitened or {},
     )
 
 
@@ -927,4 +933,6 @@ def attribute(prep: Prepared, fit: dict) -> Attribution:
                 # control loop's load), not an unexplained mismatch.
                 effect = chosen.effect
     gap = (gap_before, gap_after, floor, shrink)
-    return attribution(prep, effect, chosen, list(cands.values()), tests, gap)
+    return attribution(
+        prep, effect, chosen, list(cands.values()), tests, gap, whitened=cands_pe
+    )

@@ -2,6 +2,7 @@
 shrinks once that effect is added (the contract `../shared/contracts/gap-case.md`)."""
 
 import functools as ft
+import math
 from collections import defaultdict
 from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import ThreadPoolExecutor
@@ -13,7 +14,7 @@ import numpy as np
 
 from .._runtime import host_cores
 from ..models import DiscreteTransferFunction, Hammerstein, PiecewiseLinear
-from .attribute import Attribution, attribute
+from .attribute import Attribution, Candidate, attribute, one_step_errors
 from .decide import decide
 from .layout import (
     NOMINAL_UNCERTAINTY,
@@ -158,15 +159,42 @@ def run_blocks(n_cases: int) -> list[range]:
 
 def _tried(att: Attribution) -> dict[str, tuple[float, np.ndarray]]:
     """Each class tried once, `none` included: its validation mean-square error and
-    residual. Beside a fitted nominal a re-fit is no verdict, and `none` is the
-    reference (the re-fit's when it is the reference: `attribute`)."""
+    residual, the evidence of `probabilities`. Beside a fitted nominal a re-fit is
+    no verdict, and `none` is the reference (the re-fit's when it is the
+    reference: `attribute`).
+
+    Named a noise model, the evidence is like for like: every deterministic
+    candidate is seen through the named predictor as the cascade's tests through
+    it see the class (`attribute.one_step_errors` of its prediction-error fit
+    where one was made, `Attribution.whitened`), so its one-step-ahead errors,
+    not its simulation errors, stand against the named model's (the `none`
+    rival keeps the white-noise predictor, its simulation residual). The likelihood rule's noise
+    models (`decide`: several parameters, `noise_model` among them) are not
+    one-parameter predictors; there every rival keeps its own measure."""
+    chosen = att.chosen
+    through = (
+        chosen is not None
+        and chosen.measure == "one_step_prediction"
+        and len(chosen.params) == 1
+    )
+
+    def seen(c: Candidate) -> tuple[float, np.ndarray]:
+        if not (through and c.measure == "simulation"):
+            return c.gap_after**2, c.residual
+        r = att.whitened.get(c.effect, c).residual
+        err = one_step_errors(chosen, r)
+        if err is None:  # a failed fit
+            return math.inf, r
+        return float(np.mean(err**2)), err
+
     out = {"none": (att.gap_before**2, att.r_before)} | {
-        c.effect: (c.gap_after**2, c.residual) for c in att.candidates
+        c.effect: seen(c) for c in att.candidates
     }
     if att.fitted:
-        refit = out.pop("parameter_mismatch")
-        if att.reference == "refit":
-            out["none"] = refit
+        out.pop("parameter_mismatch")
+        if att.reference == "refit":  # its simulation: the white-noise predictor
+            refit = next(c for c in att.candidates if c.effect == "parameter_mismatch")
+            out["none"] = (refit.gap_after**2, refit.residual)
     return out
 
 
@@ -238,7 +266,13 @@ def _result(prep, att: Attribution, val: dict) -> GapDiagnosis:
         tests=att.tests
         | {
             "nominal_prior": {"weight": float(prep.arrays.prior_weight)},
-            "evidence": {"samples": len(val["y"]), "effective_samples": n_eff},
+            "evidence": {
+                "samples": len(val["y"]),
+                "effective_samples": n_eff,
+                # each class's validation mean square `probabilities` read
+                # (written null where infinite)
+                "mse": {k: float(v) for k, v in mse.items()},
+            },
         },
         gap_definition=definition,
         t=val["t"],

@@ -1,11 +1,15 @@
 """`probabilities` of a diagnosis: the contract's shape, the named effect on top,
-and the calibration's monotonicity."""
+the calibration's monotonicity, and the evidence it reads (`diagnose._tried`)."""
 
+import dataclasses
 import math
 
+import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
+from hamjax.diagnosis.attribute import Attribution, Candidate
+from hamjax.diagnosis.diagnose import _tried
 from hamjax.diagnosis.probabilities import CLASSES, named_confidence, probabilities
 
 
@@ -77,3 +81,68 @@ def test_an_unexplained_gap_is_as_sure_as_the_share_the_best_fit_leaves():
     assert p["saturation"] == max(v for k, v in p.items() if k != "unexplained")
     # a shrink at or below 0 leaves it all unexplained
     assert probabilities("unexplained", mse, 1000, -0.2)["unexplained"] == 1.0
+
+
+def _level_errors(r, gain):
+    """One-step errors of the local level, written out: l_0 = 0, e_k = r_k - l_k,
+    l_{k+1} = l_k + gain e_k."""
+    level, out = 0.0, np.empty_like(r)
+    for k, rk in enumerate(r):
+        out[k] = rk - level
+        level += gain * out[k]
+    return out
+
+
+def _rms(x):
+    return float(np.sqrt(np.mean(np.square(x))))
+
+
+def test_a_noise_verdict_is_weighed_like_for_like():
+    # Named `drift`, a deterministic rival's evidence is its validation residual
+    # through the named predictor (one-step errors), not its simulation residual;
+    # `none` keeps the white-noise predictor. Named the rival, nothing changes.
+    # The reference: the local level's recursion written out (`_level_errors`).
+    rng = np.random.default_rng(0)
+    n, gain = 400, 0.3
+    r_nominal = 0.05 * np.cumsum(rng.normal(size=n)) + rng.normal(size=n)
+    r_effect = r_nominal - 0.5 * np.sin(np.arange(n) / 10)
+    e_drift = _level_errors(r_nominal, gain)
+    drift = Candidate(
+        "drift",
+        -1,
+        _rms(e_drift),
+        e_drift,
+        None,
+        params={"level_gain": {"value": gain, "std": 0.0}},
+        measure="one_step_prediction",
+    )
+    sat = Candidate("saturation", 3, _rms(r_effect), r_effect, np.zeros(n))
+    att = Attribution(
+        effect="drift",
+        gap_before=_rms(r_nominal),
+        gap_after=_rms(e_drift),
+        noise_floor=1.0,
+        shrink=1.0,
+        candidates=[drift, sat],
+        chosen=drift,
+        tests={},
+        r_before=r_nominal,
+        y_nominal=np.zeros(n),
+    )
+    mse = {k: v[0] for k, v in _tried(att).items()}
+    assert mse["saturation"] == pytest.approx(
+        np.mean(_level_errors(r_effect, gain) ** 2), rel=1e-12
+    )
+    assert mse["saturation"] < _rms(r_effect) ** 2  # the predictor took the drift
+    assert mse["none"] == pytest.approx(_rms(r_nominal) ** 2, rel=1e-12)
+    assert mse["drift"] == pytest.approx(_rms(e_drift) ** 2, rel=1e-12)
+    # where the class was re-fitted by prediction error, that fit is what is seen
+    r_pe = r_nominal - 0.6 * np.sin(np.arange(n) / 10)
+    sat_pe = dataclasses.replace(sat, residual=r_pe)
+    with_pe = dataclasses.replace(att, whitened={"saturation": sat_pe})
+    assert _tried(with_pe)["saturation"][0] == pytest.approx(
+        np.mean(_level_errors(r_pe, gain) ** 2), rel=1e-12
+    )
+    named_sat = dataclasses.replace(with_pe, effect="saturation", chosen=sat)
+    mse = {k: v[0] for k, v in _tried(named_sat).items()}
+    assert mse["saturation"] == pytest.approx(_rms(r_effect) ** 2, rel=1e-12)

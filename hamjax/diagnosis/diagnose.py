@@ -168,9 +168,10 @@ def _tried(att: Attribution) -> dict[str, tuple[float, np.ndarray]]:
     it see the class (`attribute.one_step_errors` of its prediction-error fit
     where one was made, `Attribution.whitened`), so its one-step-ahead errors,
     not its simulation errors, stand against the named model's (the `none`
-    rival keeps the white-noise predictor, its simulation residual). The likelihood rule's noise
-    models (`decide`: several parameters, `noise_model` among them) are not
-    one-parameter predictors; there every rival keeps its own measure."""
+    rival keeps the white-noise predictor, its simulation residual). The
+    likelihood rule's noise models (`decide`: several parameters,
+    `noise_model` among them) are not one-parameter predictors; there every
+    rival keeps its own measure."""
     chosen = att.chosen
     through = (
         chosen is not None

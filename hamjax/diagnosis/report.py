@@ -47,7 +47,10 @@ def _merged_bands(bands: list[dict]) -> list[tuple[float, float]]:
 
 
 def _number(x) -> str:
-    """A value for a person: floats to 3 significant digits."""
+    """A value for a person: floats to 3 significant digits, a dict's values so
+    (`{none 0.362, drift 0.0236}`)."""
+    if isinstance(x, dict):
+        return "{" + ", ".join(f"{a} {_number(b)}" for a, b in x.items()) + "}"
     if isinstance(x, bool) or not isinstance(x, float):
         return str(x)
     return f"{x:.3g}"

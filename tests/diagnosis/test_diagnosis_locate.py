@@ -68,3 +68,15 @@ def test_the_report_says_when_a_record_has_two_input_levels():
     assert "seen there at one point" in flat
     # a record of many levels on both sides: nothing said
     assert "at most two levels" not in report_markdown(_diagnosis(noise, noise))
+
+
+def test_the_significance_lines_give_three_digits_nested_too():
+    d = _diagnosis(np.sin(np.arange(400.0)), np.cos(np.arange(400.0)))
+    d.tests = {
+        "evidence": {
+            "effective_samples": 233.87654,
+            "mse": {"none": 0.36182950652, "drift": 0.0235661999},
+        }
+    }
+    text = report_markdown(d)
+    assert "- evidence: effective_samples=234, mse={none 0.362, drift 0.0236}" in text

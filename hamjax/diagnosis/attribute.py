@@ -782,7 +782,7 @@ def attribute(prep: Prepared, fit: dict) -> Attribution:
     cands = deterministic_candidates(prep, fit, best_rows)
     # the same rows re-fitted by prediction error with the noise model
     # (`schedule.whitening_items`), where it is significant
-    cands_pe = cands
+    cands_pe = dict(cands)  # not the noise candidates added to `cands` below
     if "whitened" in fit:
         cands_pe = deterministic_candidates(prep, fit["whitened"], best_rows)
     # beside a fitted nominal the re-fit is the reference (module docstring)

@@ -188,14 +188,13 @@ def _tried(att: Attribution) -> dict[str, tuple[float, np.ndarray]]:
             return math.inf, r
         return float(np.mean(err**2)), err
 
-    out = {"none": (att.gap_before**2, att.r_before)} | {
-        c.effect: seen(c) for c in att.candidates
-    }
-    if att.fitted:
-        out.pop("parameter_mismatch")
-        if att.reference == "refit":  # its simulation: the white-noise predictor
-            refit = next(c for c in att.candidates if c.effect == "parameter_mismatch")
-            out["none"] = (refit.gap_after**2, refit.residual)
+    out = {"none": (att.gap_before**2, att.r_before)}
+    for c in att.candidates:
+        if att.fitted and c.effect == "parameter_mismatch":
+            if att.reference == "refit":  # its simulation: the white-noise predictor
+                out["none"] = (c.gap_after**2, c.residual)
+        else:
+            out[c.effect] = seen(c)
     return out
 
 

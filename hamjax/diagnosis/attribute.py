@@ -272,9 +272,8 @@ breakpoints, so there the `dead_zone` candidate is dropped (it *is*
 `parameter_mismatch`).
 """
 
-import dataclasses
 import functools as ft
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.stats import chi2
@@ -636,14 +635,10 @@ def _gap_through_noise(
     tests["gap_through_noise"] = gap
     pm = cands["parameter_mismatch"]
     structural = [c for c in det if c.effect != "parameter_mismatch"]
-    if not structural:
-        return pm if gap["significant"] else None
     best_s = min(structural, key=lambda c: rms(errs[c.effect]))
     if est is not None:
         seen = [
-            dataclasses.replace(
-                c, residual=errs[c.effect], gap_after=rms(errs[c.effect])
-            )
+            replace(c, residual=errs[c.effect], gap_after=rms(errs[c.effect]))
             for c in structural
         ]
         chosen_t, tie = structural_choice(seen, *est(structural))
@@ -657,11 +652,8 @@ def _gap_through_noise(
     if not gap["significant"]:
         # or by likelihood (module docstring, *Both routes at the gap*): the
         # structural step's nested test, the gap confirmed on validation
-        z_gap = (
-            gap["z"]
-            if best is best_s
-            else _over_noise(noise_c, best_s.residual, sig)["z"]
-        )
+        # (`_over_noise`'s z, on the one-step errors already at hand)
+        z_gap = sig(noise_c.residual, e_s, rms(e_s) ** 2)[1]
         gap["z_confirm"] = z_gap
         lr_test = lr(pm, best_s, len(structural), z_s)
         if lr_test is None:

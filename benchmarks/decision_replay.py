@@ -4,6 +4,7 @@ set's fits once, then replay the rule of whichever hamjax is first on the path.
     python benchmarks/decision_replay.py capture --set SETS/B9 --out fits/B9.pkl
     python benchmarks/decision_replay.py capture --loops 4 --out fits/L4.pkl
     python benchmarks/decision_replay.py score fits/*.pkl --names before.json
+    python benchmarks/decision_replay.py fits fits/*.pkl
     PYTHONPATH=/path/to/worktree python benchmarks/decision_replay.py \\
         score fits/*.pkl --against before.json
 
@@ -18,6 +19,10 @@ those fits and prints per file the accuracy, the false alarms on `none`, and
 on control loops the stiction recall and false-alarm rate (names in
 `probabilities.STICTION_LIKE`); `--names` writes every case's name,
 `--against` reads such a file and lists the cases whose name changed.
+`fits` applies no rule: per file, the prediction-error rows that nest the
+re-fit yet end above its one-step SSE, the cases with a prediction-error fit
+whose linear part leaves the unit circle, and the re-fits that validate worse
+than the nominal (docs/diagnosis-history.md, 2026-12-07).
 
 What it can replay: the fits depend only on the fitting code, so a change to
 `attribute` or `decide` is measured on the fits captured before it. A change
@@ -152,6 +157,71 @@ def _score(path: Path, rule: str) -> tuple[dict, str]:
     return named, line
 
 
+def _fits_report(path: Path) -> str:
+    """What the captured fits of `path` show, no rule applied: the prediction-error
+    rows that nest the re-fit (free all of its slots and more) yet end above its
+    one-step SSE (and their median likelihood ratio), the cases with a
+    prediction-error row whose linear part has a pole beyond 1 + 1e-6, and the
+    cases whose re-fit simulates validation worse than the nominal (with how
+    many of them were named wrong)."""
+    import jax
+    import jax.numpy as jnp
+    import numpy as np
+
+    from hamjax.diagnosis.augmented import filter_coefficients
+    from hamjax.diagnosis.layout import finite_sse, n_beyond, validation_sse
+    from hamjax.diagnosis.schedule import leading_rows
+
+    coefficients = jax.jit(filter_coefficients)
+    data = pickle.loads(path.read_bytes())
+    whitened = nesting = above = unstable = worse = worse_wrong = 0
+    lrs, radii = [], []
+    for truth, prep, fit, named in data.values():
+        refit = leading_rows(prep, fit)[2]
+        nominal = np.sum(
+            (np.asarray(prep.arrays.y_val)[: prep.n_val] - prep.w_val) ** 2
+        )
+        if validation_sse(prep, fit)[refit] > nominal:
+            worse += 1
+            worse_wrong += named != truth["effect"]
+        white = fit.get("whitened")
+        if white is None:
+            continue
+        whitened += 1
+        sse = finite_sse(white)
+        for k in white["rows"]:
+            if k == refit or not n_beyond(prep, refit, k) == 0 < n_beyond(
+                prep, k, refit
+            ):
+                continue
+            nesting += 1
+            if sse[k] > sse[refit]:
+                above += 1
+                lrs.append((sse[refit] - sse[k]) / sse[k] * prep.n_est)
+        radius = 0.0
+        for k in white["rows"]:
+            a = np.trim_zeros(
+                np.asarray(
+                    coefficients(jnp.asarray(white["params"][k]), prep.arrays)[1]
+                ),
+                "b",
+            )
+            if a.shape[0] > 1:
+                radius = max(radius, float(np.max(np.abs(np.roots(a)))))
+        if radius > 1 + 1e-6:
+            unstable += 1
+            radii.append(radius)
+    median = f"{np.median(lrs):.1f}" if lrs else "-"
+    top = f", up to {max(radii):.4f}" if radii else ""
+    return (
+        f"{path.name}: {len(data)} cases, {whitened} fitted by prediction error; "
+        f"nesting rows above the re-fit {above} of {nesting} (median likelihood "
+        f"ratio {median}); cases with a prediction-error pole beyond 1 + 1e-6 "
+        f"{unstable}{top}; re-fit validating worse than the nominal {worse} "
+        f"({worse_wrong} of them named wrong)"
+    )
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -166,6 +236,8 @@ def main(argv=None) -> None:
     score.add_argument("--rule", default="cascade")
     score.add_argument("--names", type=Path, help="write every case's name here")
     score.add_argument("--against", type=Path, help="names written earlier")
+    report = sub.add_parser("fits", help="what the captured fits show, no rule")
+    report.add_argument("fits", type=Path, nargs="+")
     args = parser.parse_args(argv)
 
     import hamjax
@@ -190,6 +262,10 @@ def main(argv=None) -> None:
         args.out.parent.mkdir(parents=True, exist_ok=True)
         args.out.write_bytes(pickle.dumps(store))
         print(f"{args.out}: {len(store)} cases captured")
+        return
+    if args.command == "fits":
+        for path in args.fits:
+            print(_fits_report(path))
         return
     before = json.loads(args.against.read_text()) if args.against else {}
     every = {}

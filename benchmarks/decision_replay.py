@@ -190,9 +190,9 @@ def _fits_report(path: Path) -> str:
         whitened += 1
         sse = finite_sse(white)
         for k in white["rows"]:
-            if k == refit or not n_beyond(prep, refit, k) == 0 < n_beyond(
-                prep, k, refit
-            ):
+            # row k nests the re-fit: frees all of its slots, and more
+            nests = n_beyond(prep, refit, k) == 0 and n_beyond(prep, k, refit) > 0
+            if k == refit or not nests:
                 continue
             nesting += 1
             if sse[k] > sse[refit]:

@@ -70,13 +70,14 @@ def test_the_fits_report_counts_what_was_made_so(tmp_path):
         return above, nesting, unstable, worse
 
     white = fit["whitened"]
-    above, nesting, unstable, worse = report(fit)
+    above, nesting, _, _ = report(fit)
     refit = leading_rows(prep, fit)[2]
     k = next(
         k
         for k in white["rows"]
         if k != refit
-        and n_beyond(prep, refit, k) == 0 < n_beyond(prep, k, refit)
+        and n_beyond(prep, refit, k) == 0
+        and n_beyond(prep, k, refit) > 0
         and white["sse_est"][k] <= white["sse_est"][refit]
     )
     doctored = {key: np.copy(v) for key, v in white.items()}

@@ -30,7 +30,9 @@ to the fits, to the candidate rows, or to what the schedule decides while
 fitting (which rows are re-fitted by prediction error follows
 `attribute.whitening_predictor`; the noise candidates are stored with the
 fits) needs a new capture. The pickles hold hamjax's internal objects: replay
-them with a tree whose `Prepared` and `Row` are those that captured them.
+them with a tree whose `Prepared`, `Row` and `Candidate` are those that
+captured them (noise candidates captured before `Candidate.predictor`, 2026-12-07,
+carry none: capture anew).
 
 A capture takes as long as the diagnosis (3-5 minutes for 240 cases on 2
 cores), a replay of one set a few seconds. No timing is reported.

@@ -328,6 +328,10 @@ class Candidate:
     # noise models: `(name, value)` of the finite filter for prediction-error
     # re-fits (`noise_fit.NoisePredictor.whitening`)
     whitening: tuple[str, float] | None = None
+    # the cascade's noise models (`noise_candidates`): their one-step predictor,
+    # `(name, value)` as `noise_fit.predictor_errors` takes it; None for a
+    # deterministic candidate and for the likelihood rule's noise models
+    predictor: tuple[str, float] | None = None
 
 
 @dataclass
@@ -569,8 +573,7 @@ def one_step_errors(noise_c: Candidate, r: np.ndarray) -> np.ndarray | None:
     None when `r` is not finite (a failed fit)."""
     if not np.all(np.isfinite(r)):
         return None
-    ((name, param),) = noise_c.params.items()
-    return predictor_errors(name, param["value"], r)
+    return predictor_errors(*noise_c.predictor, r)
 
 
 def _over_noise(noise_c: Candidate, r_val: np.ndarray, sig) -> dict:
@@ -585,13 +588,12 @@ def _over_noise(noise_c: Candidate, r_val: np.ndarray, sig) -> dict:
     err = one_step_errors(noise_c, r_val)
     if err is None:
         return {"z": -np.inf, "significant": False, "noise": noise_c.effect}
-    (param,) = noise_c.params.values()
     ok, z = sig(noise_c.residual, err, rms(err) ** 2)
     return {
         "z": z,
         "significant": bool(ok),
         "noise": noise_c.effect,
-        "noise_param": param["value"],
+        "noise_param": noise_c.predictor[1],
         "gap_with_noise": rms(err),
         "nominal_gap_with_noise": noise_c.gap_after,
     }
@@ -811,6 +813,7 @@ def noise_candidates(prep: Prepared, fit: dict | None = None) -> dict[str, Candi
             measure="one_step_prediction",
             est_sse=est_sse,
             whitening=whitening,
+            predictor=(pname, value),
         )
     return cands
 
@@ -842,8 +845,7 @@ def whitening_predictor(
         return None
     if c.whitening is not None:  # the flicker model's low-order stand-in
         return c.whitening
-    ((name, param),) = c.params.items()
-    return name, param["value"]
+    return c.predictor
 
 
 def attribute(prep: Prepared, fit: dict) -> Attribution:
@@ -890,6 +892,7 @@ def attribute(prep: Prepared, fit: dict) -> Attribution:
             None,
             noise_c.params,
             measure="one_step_prediction",
+            predictor=noise_c.predictor,
         )
 
     det = [cands[e] for e in DETERMINISTIC_NAMES if e in cands]

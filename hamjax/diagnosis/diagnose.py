@@ -170,14 +170,10 @@ def _tried(att: Attribution) -> dict[str, tuple[float, np.ndarray]]:
     not its simulation errors, stand against the named model's (the `none`
     rival keeps the white-noise predictor, its simulation residual). The
     likelihood rule's noise models (`decide`: several parameters,
-    `noise_model` among them) are not one-parameter predictors; there every
-    rival keeps its own measure."""
+    `noise_model` among them) carry no one-step predictor
+    (`Candidate.predictor`); there every rival keeps its own measure."""
     chosen = att.chosen
-    through = (
-        chosen is not None
-        and chosen.measure == "one_step_prediction"
-        and len(chosen.params) == 1
-    )
+    through = chosen is not None and chosen.predictor is not None
 
     def seen(c: Candidate) -> tuple[float, np.ndarray]:
         if not (through and c.measure == "simulation"):

@@ -115,6 +115,7 @@ def test_a_noise_verdict_is_weighed_like_for_like():
         None,
         params={"level_gain": {"value": gain, "std": 0.0}},
         measure="one_step_prediction",
+        predictor=("level_gain", gain),
     )
     sat = Candidate("saturation", 3, _rms(r_effect), r_effect, np.zeros(n))
     att = Attribution(

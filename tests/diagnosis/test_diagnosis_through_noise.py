@@ -42,7 +42,14 @@ def _noise_candidate(r_nom):
     err = predictor_errors("ar1_pole", POLE, r_nom)
     params = {"ar1_pole": {"value": POLE, "std": 0.0}}
     return Candidate(
-        "coloured_noise", -1, rms(err), err, None, params, "one_step_prediction"
+        "coloured_noise",
+        -1,
+        rms(err),
+        err,
+        None,
+        params,
+        "one_step_prediction",
+        predictor=("ar1_pole", POLE),
     )
 
 

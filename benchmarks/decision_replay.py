@@ -173,6 +173,7 @@ def _fits_report(path: Path) -> str:
     from hamjax.diagnosis.augmented import filter_coefficients
     from hamjax.diagnosis.layout import finite_sse, n_beyond, validation_sse
     from hamjax.diagnosis.schedule import leading_rows
+    from hamjax.models.linear._base import companion_roots
 
     coefficients = jax.jit(filter_coefficients)
     data = pickle.loads(path.read_bytes())
@@ -209,7 +210,8 @@ def _fits_report(path: Path) -> str:
                 "b",
             )
             if a.shape[0] > 1:
-                radius = max(radius, float(np.max(np.abs(np.roots(a)))))
+                roots = companion_roots(a[1:] / a[0], xp=np)
+                radius = max(radius, float(np.max(np.abs(roots))))
         if radius > 1 + 1e-6:
             unstable += 1
             radii.append(radius)

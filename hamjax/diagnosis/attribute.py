@@ -841,11 +841,9 @@ def whitening_predictor(
     replaced here by its low-order stand-in); None when the reference's
     validation residual `r_ref` (`reference`) has no significant noise model."""
     c, ok, _ = nominal_noise(noise, r_ref)
-    if not ok:
-        return None
-    if c.whitening is not None:  # the flicker model's low-order stand-in
-        return c.whitening
-    return c.predictor
+    # `noise_candidates` sets `whitening` on every noise model: its predictor,
+    # or the flicker model's low-order stand-in
+    return c.whitening if ok else None
 
 
 def attribute(prep: Prepared, fit: dict) -> Attribution:

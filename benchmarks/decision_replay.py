@@ -135,17 +135,26 @@ def _loop_items(seed: int, n_cases: int) -> tuple[list, list]:
 
 
 def _score(path: Path, rule: str) -> tuple[dict, str]:
-    from hamjax.diagnosis.diagnose import RULES
+    from hamjax.diagnosis.diagnose import RULES, attribution_probabilities
     from hamjax.diagnosis.probabilities import STICTION_LIKE
+    from hamjax.papers.gap.blind import calibration
 
     data = pickle.loads(path.read_bytes())
-    named = {n: RULES[rule](prep, fit).effect for n, (_, prep, fit, _) in data.items()}
+    named, confidence = {}, {}
+    for n, (_, prep, fit, _) in data.items():
+        att = RULES[rule](prep, fit)
+        named[n] = att.effect
+        confidence[n] = attribution_probabilities(att)[att.effect]
     truth = {n: entry[0]["effect"] for n, entry in data.items()}
     right = sum(named[n] == truth[n] for n in named)
     nones = [n for n in named if truth[n] == "none"]
+    ece = calibration(
+        [confidence[n] for n in named], [named[n] == truth[n] for n in named]
+    )["ece"]
     line = (
         f"{path.name}: accuracy {right / len(named):.3f} ({right} of {len(named)}), "
         f"false alarm on none {sum(named[n] != 'none' for n in nones)} of {len(nones)}"
+        f", ECE {ece:.3f}"
     )
     if all("stiction" in entry[0] for entry in data.values()):  # control loops
         sticky = [n for n in named if truth[n] == "backlash"]

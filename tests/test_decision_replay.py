@@ -8,6 +8,7 @@ import jax.random as jr
 from helpers import benchmark_module
 
 from hamjax.diagnosis.diagnose import diagnose_many
+from hamjax.papers.gap.blind import calibration
 from hamjax.papers.gap.demo_cases import tiny_case
 
 
@@ -16,7 +17,8 @@ def test_the_replayed_rule_names_what_the_diagnosis_named(tmp_path, capsys):
     effects = ("saturation", "none")
     items = [tiny_case(jr.key(70 + i), e) for i, e in enumerate(effects)]
     kept = replay.capture(items, [False, False])
-    direct = [d.effect for d in diagnose_many(items)]
+    diagnoses = diagnose_many(items)
+    direct = [d.effect for d in diagnoses]
     assert [k[2] for k in kept] == direct
     # the pickle as `capture` writes it: truth, prepared rows, fits, name
     store = {
@@ -29,6 +31,12 @@ def test_the_replayed_rule_names_what_the_diagnosis_named(tmp_path, capsys):
     assert list(named.values()) == direct
     right = sum(n == e for n, e in zip(direct, effects, strict=True))
     assert line.startswith(f"fits.pkl: accuracy {right / 2:.3f} ({right} of 2)")
+    # the calibration of the probabilities the diagnosis itself stated
+    ece = calibration(
+        [d.probabilities[d.effect] for d in diagnoses],
+        [n == e for n, e in zip(direct, effects, strict=True)],
+    )["ece"]
+    assert f", ECE {ece:.3f}" in line
     # a names file written earlier: the changed cases are listed
     before = tmp_path / "before.json"
     names = {"fits.pkl": {"case_0": "drift", "case_1": direct[1]}}

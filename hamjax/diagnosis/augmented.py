@@ -162,6 +162,10 @@ class CaseArrays(eqx.Module):
     # output error
     noise_fir: Float[Array, " 3"]
     noise_ar: Float[Array, ""]
+    # the filter's direction in its one free parameter (the predictor's pole or
+    # gain, fitted jointly with the row: `fit.normal_equations`); zero: fixed
+    noise_dfir: Float[Array, " 3"]
+    noise_dar: Float[Array, ""]
 
 
 class Row(eqx.Module):

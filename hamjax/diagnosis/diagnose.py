@@ -205,6 +205,20 @@ def _evidence_samples(att: Attribution, tried: dict) -> float:
     return effective_samples(tried[named][1], tried[rival][1])
 
 
+def _evidence(att: Attribution) -> tuple[dict[str, float], float]:
+    """`(mse, n_eff)`: each class tried once (`_tried`) with its validation mean
+    square, and the effective samples of the named effect against its best
+    rival: what `probabilities` reads."""
+    tried = _tried(att)
+    return {k: v[0] for k, v in tried.items()}, _evidence_samples(att, tried)
+
+
+def attribution_probabilities(att: Attribution) -> dict[str, float]:
+    """The stated probabilities of one case's attribution (`probabilities`), as
+    `diagnosis.json` holds them."""
+    return probabilities(att.effect, *_evidence(att), att.shrink)
+
+
 def _result(prep, att: Attribution, val: dict) -> GapDiagnosis:
     chosen = att.chosen
     if chosen is None:
@@ -247,9 +261,7 @@ def _result(prep, att: Attribution, val: dict) -> GapDiagnosis:
         y=val["y"],
         v_est=np.asarray(prep.arrays.v_est)[: prep.n_est],
     )
-    tried = _tried(att)
-    mse = {k: v[0] for k, v in tried.items()}
-    n_eff = _evidence_samples(att, tried)
+    mse, n_eff = _evidence(att)
     return GapDiagnosis(
         effect=att.effect,
         probabilities=probabilities(att.effect, mse, n_eff, att.shrink),

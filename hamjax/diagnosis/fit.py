@@ -65,8 +65,14 @@ class RowFit(eqx.Module):
     result: RESULTS  # successful, or not_converged (stopped at its step budget)
     steps: Int[Array, "..."]  # Levenberg-Marquardt iterations taken
     lam: Float[Array, "..."]  # damping of the last proposed step (to continue)
-    jtj: Float[Array, "... P P"]  # Gauss-Newton information J^T J (scaled output)
+    # Gauss-Newton information J^T J (scaled output) of `theta`; with the noise
+    # filter's parameter fitted jointly, its Schur complement (that parameter
+    # profiled out: the information left about `theta`)
+    jtj: Float[Array, "... P P"]
     s2: Float[Array, "..."]  # residual variance (scaled output), SSE / dof
+    # how far the noise filter's parameter moved in a joint fit (the predictor's
+    # pole or gain, `CaseArrays.noise_dfir`, `noise_dar`); 0 with a fixed filter
+    noise_shift: Float[Array, "..."]
 
 
 def nominal_mask(row: Row, case: CaseArrays) -> Bool[Array, " P"]:
@@ -125,12 +131,16 @@ def normal_equations(
 
     With the case's noise filter $A(q)$ (`case.noise_fir`, `case.noise_ar`) not
     the identity, `r` and `J` are those of the one-step-ahead prediction errors
-    $A(q) r$ of the output with that noise model, from rest (`schedule.whitening_items`): the
-    prediction-error fit with a fixed noise model. `whiten=False`: the filter is
-    skipped (output error; the case's filter must be the identity).
+    $A(q) r$ of the output with that noise model, from rest
+    (`schedule.whitening_items`): the prediction-error fit. `whiten=False`: the
+    filter is skipped (output error; the case's filter must be the identity).
+    Here the filter is held fixed; `fit_row` frees its parameter too (the
+    Box-Jenkins fit, `_normal_equations`).
     """
     flags = (memory, table, feedback, whiten)
-    return _normal_equations(theta, row, case, flags)[0]
+    theta_ext = jnp.concatenate([theta, jnp.zeros(1, theta.dtype)])
+    (sse, H, g), _ = _normal_equations(theta_ext, row, case, flags)
+    return sse, H[:-1, :-1], g[:-1]
 
 
 def _noise_block(x, state, fir, g):
@@ -152,10 +162,21 @@ def _noise_block(x, state, fir, g):
     return (x[:, -2:], e[:, -1]), e
 
 
-def _normal_equations(theta, row, case, flags):
-    """`normal_equations`, and the physical parameters and filter at `theta`;
-    `flags = (memory, table, feedback, whiten)`."""
+def _normal_equations(theta_ext, row, case, flags):
+    """`normal_equations` of `theta_ext = (theta, eta)`, and the physical
+    parameters and filter at `theta`; `flags = (memory, table, feedback, whiten)`.
+
+    `eta` moves the noise filter along its direction (`case.noise_dfir`,
+    `case.noise_dar`: the one-step predictor's parameter, the AR(1) pole or the
+    local level's gain), so that the deterministic part and the noise model are
+    fitted jointly by prediction error (Box-Jenkins; Ljung, *System
+    Identification*, 1999, sec. 7.2): the last row and column of `J^T J` and the
+    last entry of `J^T r` are those of `eta`, whose column is the derivative of
+    the filtered residual $\\partial A / \\partial \\eta\\, r$ (forward mode
+    through the filter's scan, its tangent carried from block to block). A zero
+    direction, or `whiten=False`, leaves that column zero (the filter fixed)."""
     memory, table, feedback, whiten = flags
+    theta, eta = theta_ext[:-1], theta_ext[-1]
     P, L = theta.shape[0], case.v_est.shape[0]
     pad = -L % BLOCK
     vd = jnp.pad(delay(case.v_est, row.tau), (0, pad), mode="edge")
@@ -179,12 +200,27 @@ def _normal_equations(theta, row, case, flags):
         jnp.zeros((P, *filt0.shape), filt0.dtype),
         jnp.zeros(P, theta.dtype),
     )
-    # the noise filter A(q) on the residual and its Jacobian (P + 1 signals)
-    noise0 = (jnp.zeros((P + 1, 2), theta.dtype), jnp.zeros(P + 1, theta.dtype))
+    # the noise filter A(q) on the residual and its Jacobian (P + 1 signals),
+    # and the residual's tangent in eta (its state: the filter's, of one signal)
+    zeros = lambda *s: jnp.zeros(s, theta.dtype)  # noqa: E731
+    noise0 = ((zeros(P + 1, 2), zeros(P + 1)), (zeros(1, 2), zeros(1)))
+    fir = case.noise_fir + eta * case.noise_dfir
+    ar = case.noise_ar + eta * case.noise_dar
 
     def noise(x, ns, mb):
-        ns, e = _noise_block(x, ns, case.noise_fir, case.noise_ar)
-        return ns, e * mb[None]  # nothing past the record's end
+        state, dstate = ns
+        new_state, e = _noise_block(x, state, fir, ar)
+        one = lambda s, f, g: _noise_block(x[:1], s, f, g)  # noqa: E731
+        _, (dstate, de) = jax.jvp(
+            one,
+            ((state[0][:1], state[1][:1]), fir, ar),
+            (dstate, case.noise_dfir, case.noise_dar),
+        )
+        # nothing past the record's end
+        return (new_state, dstate), jnp.concatenate([e, de]) * mb[None]
+
+    def skip(x, ns, mb):
+        return ns, jnp.concatenate([x, jnp.zeros_like(x[:1])])
 
     def body(carry):
         k, state, dstate, ns, sse, H, g = carry
@@ -200,9 +236,8 @@ def _normal_equations(theta, row, case, flags):
         ok = jnp.isfinite(r)
         r = jnp.where(ok, r, 1e3)
         J = jnp.where(ok[None], dy * (mb / case.y_scale)[None], 0.0)  # [P, BLOCK]
-        skip = lambda x, ns, mb: (ns, x)  # noqa: E731
         ns, x = switch(whiten, noise, skip, jnp.concatenate([r[None], J]), ns, mb)
-        r, J = x[0], x[1:]
+        r, J = x[0], x[1:]  # J: [P + 1, BLOCK], eta's row last
         return k + 1, state, dstate, ns, sse + r @ r, H + J @ J.T, g + J @ r
 
     carry = (
@@ -211,8 +246,8 @@ def _normal_equations(theta, row, case, flags):
         dstate0,
         noise0,
         jnp.zeros((), theta.dtype),
-        jnp.zeros((P, P), theta.dtype),
-        jnp.zeros(P, theta.dtype),
+        jnp.zeros((P + 1, P + 1), theta.dtype),
+        jnp.zeros(P + 1, theta.dtype),
     )
     *_, sse, H, g = lax.while_loop(lambda c: c[0] < n_blocks, body, carry)
     return (sse, H, g), (p, b, a)
@@ -233,16 +268,31 @@ def _solve_row(row, case, flags, max_steps, lam0, resume=False):
     what the stated uncertainty makes plausible, and where the estimation record
     leaves a direction of the re-fit undetermined (the gain against the slopes of
     a piecewise-linear map, an unexcited segment) every start ends at the same
-    point instead of wherever its path stopped."""
+    point instead of wherever its path stopped. The last entry of the solved
+    vector is the noise filter's parameter (`_normal_equations`), from 0 (the
+    case's filter), without a prior."""
+    theta0 = jnp.concatenate([row.theta0, jnp.zeros(1, row.theta0.dtype)])
+    mask = jnp.concatenate([nominal_mask(row, case), jnp.zeros(1, bool)])
     return least_squares(
         NormalEquations(_row_problem),
         BatchedLevenbergMarquardt(lam0=lam0, resume=resume),
-        row.theta0,
+        theta0,
         (row, case, flags),
         max_steps=max_steps,
-        prior=GaussianPrior(case.prior_weight, nominal_mask(row, case)),
+        prior=GaussianPrior(case.prior_weight, mask),
         throw=False,
     )
+
+
+def _profile_noise(H: Float[Array, "Q Q"]) -> Float[Array, "P P"]:
+    """The information about `theta` left when the noise filter's parameter (the
+    last of `H`'s `Q = P + 1`) is fitted too: the Schur complement
+    $H_{\\theta\\theta} - H_{\\theta\\eta} H_{\\eta\\eta}^{-1} H_{\\eta\\theta}$
+    ($H_{\\theta\\theta}$ itself where that parameter is fixed, $H_{\\eta\\eta} = 0$)."""
+    h = H[-1, -1]
+    c = H[:-1, -1]
+    inv = jnp.where(h > 0, 1.0 / jnp.where(h > 0, h, 1.0), 0.0)
+    return H[:-1, :-1] - inv * jnp.outer(c, c)
 
 
 def fit_row(
@@ -263,15 +313,20 @@ def fit_row(
     case's map is not a backlash, if the map reads no table (`uses_table`), and if
     the row frees no feedback slot). `whiten`: False only if the case's noise
     filter is the identity (an output-error fit; `normal_equations`); with a
-    filter, `sse_est` and `s2` are those of the prediction errors. `resume`:
-    `row.theta0` and `lam0` are a stopped fit's `theta` and `lam`, continued
-    exactly (`fitting.BatchedLevenbergMarquardt`)."""
+    filter, `sse_est` and `s2` are those of the prediction errors, and where the
+    filter has a direction (`CaseArrays.noise_dfir`, `noise_dar`) its parameter
+    is fitted jointly (`noise_shift`). `resume`: `row.theta0` and `lam0` are a
+    stopped fit's `theta` and `lam`, continued exactly
+    (`fitting.BatchedLevenbergMarquardt`; a joint fit's filter moved by its
+    `noise_shift` first)."""
     flags = (memory, table, feedback, whiten)
     sol = _solve_row(row, case, flags, max_steps, lam0, resume)
-    theta, (p, b, a), sse = sol.value, sol.aux, sol.stats["sse"]
+    (p, b, a), sse = sol.aux, sol.stats["sse"]
+    theta, shift = sol.value[:-1], sol.value[-1]
     n = jnp.sum(case.m_est)
     used = row.idx < case.anchor.shape[0]
-    dof = jnp.maximum(n - jnp.sum(used), 1.0)
+    joint = jnp.any(case.noise_dfir != 0) | (case.noise_dar != 0)
+    dof = jnp.maximum(n - jnp.sum(used) - joint, 1.0)
     y_val = simulate_with_filter(p, b, a, row.tau, case.v_val, case, *flags[:3])
     y_est = simulate_with_filter(p, b, a, row.tau, case.v_est, case, *flags[:3])
     sse_est = sse * case.y_scale**2
@@ -284,8 +339,9 @@ def fit_row(
         result=sol.result,
         steps=sol.stats["num_steps"],
         lam=sol.stats["damping"],
-        jtj=sol.stats["jtj"],
+        jtj=_profile_noise(sol.stats["jtj"]),
         s2=sse / dof,
+        noise_shift=shift,
     )
 
 

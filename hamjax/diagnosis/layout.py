@@ -1070,6 +1070,8 @@ def prepare(
         prior_weight=f(prior_weight(nominal_uncertainty, noise_std / y_scale)),
         noise_fir=f([1.0, 0.0, 0.0]),
         noise_ar=f(0.0),
+        noise_dfir=f([0.0, 0.0, 0.0]),
+        noise_dar=f(0.0),
     )
     return Prepared(
         arrays, rows, ctx, nom, n_est, n_val, w_est, w_val, u_val, bool(fitted_nominal)

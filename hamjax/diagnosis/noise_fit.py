@@ -174,6 +174,18 @@ def noise_filter(name: str, value: float) -> tuple[np.ndarray, float]:
     raise ValueError(f"noise_filter: unknown noise predictor {name!r}")
 
 
+def noise_direction(name: str) -> tuple[np.ndarray, float]:
+    """How `noise_filter(name, value)` moves with `value`: `(df, dg)`, the
+    derivative of its `(f, g)` (the filter is affine in the parameter), the form of
+    `augmented.CaseArrays.noise_dfir` and `noise_dar` for a prediction-error fit
+    that fits the predictor's parameter jointly (`fit.normal_equations`)."""
+    if name == "ar1_pole":
+        return np.array([0.0, -1.0, 0.0]), 0.0
+    if name == "level_gain":
+        return np.zeros(3), 1.0
+    raise ValueError(f"noise_direction: no finite filter moves with {name!r}")
+
+
 def predictor_errors(name: str, value: float, r: np.ndarray) -> np.ndarray:
     """One-step-ahead errors, on the host, of the fitted noise predictor `name`
     with parameter `value` on the residual `r`, from rest (`noise_filter`; the

@@ -39,6 +39,7 @@ the same.
 from collections import defaultdict, deque
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import equinox as eqx
 import jax
@@ -49,6 +50,7 @@ from ..simulation.sharding import effective_chunk
 from .attribute import (
     lr_over_refit,
     noise_candidates,
+    nominal_noise,
     reference,
     refit_over_nominal,
     whitening_predictor,
@@ -63,7 +65,7 @@ from .layout import (
     starts_at_nominal_numerator,
     validation_sse,
 )
-from .noise_fit import noise_filter, predictor_errors
+from .noise_fit import noise_direction, noise_filter, predictor_errors
 from .nominal_fit import NOMINAL_STEPS
 from .residuals import noise_std_differences
 
@@ -92,6 +94,28 @@ TAIL_BATCHES = 4
 FIELDS = tuple(RowFit.__dataclass_fields__)
 
 
+class NoiseSpec(NamedTuple):
+    """A prediction-error fit's noise filter (`noise_fit.noise_filter`), its
+    direction in the predictor's parameter (`noise_fit.noise_direction`; zero
+    for a fixed filter), the prior weight, and how far the parameter has moved
+    already (a resumed joint fit starts from its filter moved so far)."""
+
+    fir: np.ndarray
+    ar: float
+    weight: float
+    dfir: np.ndarray
+    dar: float
+    shift: float = 0.0
+
+    def moved(self, eta: float) -> "NoiseSpec":
+        """The filter with its parameter moved by `eta` more."""
+        return self._replace(
+            fir=self.fir + eta * self.dfir,
+            ar=self.ar + eta * self.dar,
+            shift=self.shift + eta,
+        )
+
+
 @dataclass
 class Item:
     """One fit to run: row `row` of case `case`, from `theta0`, for `budget` steps."""
@@ -104,7 +128,7 @@ class Item:
     stage: str  # "screen", "finish", "more" or "whiten"
     replace: str  # when the result replaces the row's: "always", "lower", "stopped"
     # a prediction-error fit's noise filter and prior weight (`whitening_items`)
-    noise: tuple[np.ndarray, float, float] | None = None
+    noise: NoiseSpec | None = None
     resume: bool = False  # continues a stopped fit exactly (`fit.fit_batch`)
 
 
@@ -201,6 +225,18 @@ def judged_row(
     return None
 
 
+def _direction(
+    noise: dict, r_val: np.ndarray, predictor: tuple[str, float]
+) -> tuple[np.ndarray, float]:
+    """The filter's direction in the predictor's parameter, which the
+    prediction-error fits free with the row's (`fit.normal_equations`); zero (the
+    filter fixed) where the filter only stands in for the predictor that
+    `attribute` judges through (the flicker model's, `whitening_predictor`)."""
+    if nominal_noise(noise, r_val)[0].predictor != predictor:
+        return np.zeros(3), 0.0
+    return noise_direction(predictor[0])
+
+
 def whitening_items(c: int, prep: Prepared, fits: dict) -> list[Item]:
     """The prediction-error fits of case `c`, once its rows are finished: when the
     reference's residual (the nominal's, or the re-fit's beside a fitted nominal:
@@ -210,7 +246,9 @@ def whitening_items(c: int, prep: Prepared, fits: dict) -> list[Item]:
     `CONTINUE_CLASSES` leading structural classes (by estimation SSE, as in
     `finishing_items`) and of the class of least validation error again, each
     from its output-error fit, minimising the one-step-ahead errors $A(q) r$ with
-    that noise model fixed (`fit.normal_equations`); `attribute` judges the
+    the predictor's parameter fitted too, from the reference's value (Box-Jenkins:
+    `fit.normal_equations`, `NoiseSpec`; fixed where $A$ stands in for the
+    flicker predictor); `attribute` judges the
     deterministic gap through $A$ on these fits (the other classes' on their
     output-error fits). The prior weight, a noise
     variance times the prior's precision (`layout.prior_weight`), is scaled by
@@ -226,7 +264,8 @@ def whitening_items(c: int, prep: Prepared, fits: dict) -> list[Item]:
     sigma, sigma_e = noise_std_differences(r_est), noise_std_differences(e_est)
     ratio = (sigma_e / sigma) ** 2 if sigma > 0 else 1.0
     weight = float(prep.arrays.prior_weight) * ratio
-    noise = (*noise_filter(*predictor), weight)
+    direction = _direction(fits["noise"], r_val, predictor)
+    noise = NoiseSpec(*noise_filter(*predictor), weight, *direction)
     sse, sse_val, refit, best, lead = leading_rows(prep, fits)
     chosen = min(best.values(), key=lambda k: sse_val[k])
     return [
@@ -349,6 +388,8 @@ def run_queue(
                 name: np.zeros((R, *np.shape(x)), np.asarray(x).dtype)
                 for name, x in new.items()
             }
+        if item.noise is not None:  # the parameter's move since the first filter
+            new["noise_shift"] = new["noise_shift"] + item.noise.shift
         merge(fits[c], item, new)
         spent = int(new["steps"])
         if (
@@ -368,7 +409,10 @@ def run_queue(
                         item.budget - spent + 1,
                         stage,
                         item.replace,
-                        item.noise,
+                        item.noise
+                        and item.noise.moved(
+                            float(new["noise_shift"]) - item.noise.shift
+                        ),
                         resume=True,
                     )
                 ]
@@ -497,15 +541,13 @@ def run_batch(
     cases = jtu.tree_map(lambda x: x[np.asarray([it.case for it in take])], arrays)
     noisy = [(j, it.noise) for j, it in enumerate(take) if it.noise is not None]
     if noisy:  # the prediction-error fits' noise filters and prior weights
-        fir, ar, weight = (
-            np.copy(x) for x in (cases.noise_fir, cases.noise_ar, cases.prior_weight)
-        )
-        for j, (f, g, w) in noisy:
-            fir[j], ar[j], weight[j] = f, g, w
+        names = ("noise_fir", "noise_ar", "prior_weight", "noise_dfir", "noise_dar")
+        arrays = [np.copy(getattr(cases, name)) for name in names]
+        for j, spec in noisy:
+            for x, value in zip(arrays, spec[:5], strict=True):
+                x[j] = value
         cases = eqx.tree_at(
-            lambda a: (a.noise_fir, a.noise_ar, a.prior_weight),
-            cases,
-            (fir, ar, weight),
+            lambda a: tuple(getattr(a, name) for name in names), cases, tuple(arrays)
         )
     fit = fit_padded(
         row,

@@ -719,7 +719,9 @@ def _est_through_noise(
 ) -> tuple[dict, dict]:
     """`structural_choice`'s `est_sse` and `n_params` through the noise predictor:
     each class's estimation residual (its prediction-error fit where made)
-    through `noise_c`'s one-step predictor, squared and summed."""
+    through `noise_c`'s one-step predictor with the parameter that fit reached
+    (`RowFit.noise_shift`; an output-error fit's: `noise_c`'s own), squared and
+    summed."""
     y_est = np.asarray(prep.arrays.y_est)[: prep.n_est]
     white = fit.get("whitened", fit)
     est, npar = {}, {}

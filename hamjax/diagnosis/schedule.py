@@ -409,8 +409,9 @@ def run_queue(
                         item.budget - spent + 1,
                         stage,
                         item.replace,
-                        item.noise
-                        and item.noise.moved(
+                        None
+                        if item.noise is None
+                        else item.noise.moved(
                             float(new["noise_shift"]) - item.noise.shift
                         ),
                         resume=True,
@@ -542,12 +543,12 @@ def run_batch(
     noisy = [(j, it.noise) for j, it in enumerate(take) if it.noise is not None]
     if noisy:  # the prediction-error fits' noise filters and prior weights
         names = ("noise_fir", "noise_ar", "prior_weight", "noise_dfir", "noise_dar")
-        arrays = [np.copy(getattr(cases, name)) for name in names]
+        columns = [np.copy(getattr(cases, name)) for name in names]
         for j, spec in noisy:
-            for x, value in zip(arrays, spec[:5], strict=True):
+            for x, value in zip(columns, spec[:5], strict=True):
                 x[j] = value
         cases = eqx.tree_at(
-            lambda a: tuple(getattr(a, name) for name in names), cases, tuple(arrays)
+            lambda a: tuple(getattr(a, name) for name in names), cases, tuple(columns)
         )
     fit = fit_padded(
         row,

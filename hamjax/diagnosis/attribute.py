@@ -574,9 +574,9 @@ def _lr_through_noise(
     fitted by prediction error, each with the noise model's parameter free
     (`fit["whitened"]`, `schedule.whitening_items`), on their estimation sums
     of squared one-step errors, confirmed by `z`: the two validation residuals
-    through the same predictor (given, or computed here through `noise`'s). None where either row
-    was not fitted so, where `best` frees nothing beyond `pm` (`n_beyond`: no
-    nested test), or where a residual is not finite."""
+    through the same predictor (given, or computed here through `noise`'s).
+    None where either row was not fitted so, where `best` frees nothing beyond
+    `pm` (`n_beyond`: no nested test), or where a residual is not finite."""
     white = fit.get("whitened")
     if white is None or not {pm.row, best.row} <= set(white.get("rows", ())):
         return None

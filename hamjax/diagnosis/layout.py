@@ -826,6 +826,9 @@ class Prepared:
     # the nominal is hamjax's own fit (no model.json): a re-fit of it is no
     # verdict, and the reference where it improves on it (`attribute.reference`)
     fitted: bool = False
+    # the estimation record looks closed-loop (`looks_closed_loop`); None: not
+    # tested (`prepare(screens=False)`)
+    closed_loop: bool | None = None
 
 
 def prepare(
@@ -873,6 +876,9 @@ def prepare(
     )
     w_est, w_val, step_est = w_est[:n_est], w_val[:n_val], step_est[:n_est]
     v = est["v"]
+    # the estimation record looks closed-loop (the stick-slip profile's screen,
+    # and `attribute`'s residual-input test, which does not apply there)
+    closed = looks_closed_loop(np.asarray(est["y"]), np.asarray(v)) if screens else None
     dw = np.diff(w_est) / dt if n_est > 1 else np.zeros(1)
     t_dom = dominant_time_constant(nom.den, nom.is_ct, dt)
     ctx = StartContext(
@@ -902,7 +908,7 @@ def prepare(
             L,
             refit_linear=bool(fitted_nominal and not nom.is_ct),
         )
-        if screens and looks_closed_loop(np.asarray(est["y"]), np.asarray(v))
+        if closed
         else (),
         t_dom=float(t_dom),
         refit_linear=bool(fitted_nominal and not nom.is_ct),
@@ -1074,7 +1080,17 @@ def prepare(
         noise_dar=f(0.0),
     )
     return Prepared(
-        arrays, rows, ctx, nom, n_est, n_val, w_est, w_val, u_val, bool(fitted_nominal)
+        arrays,
+        rows,
+        ctx,
+        nom,
+        n_est,
+        n_val,
+        w_est,
+        w_val,
+        u_val,
+        bool(fitted_nominal),
+        closed,
     )
 
 

@@ -190,6 +190,16 @@ def report_markdown(d, name: str = "case", nominal: str | None = None) -> str:
             f"{fb['lag']}): v is a controller's output, so the noise reaches it and "
             "simulation-error fits can be biased"
         )
+    dep = d.tests.get("input_dependence", {})
+    if dep.get("dependent") and d.effect not in ("drift", "coloured_noise", "none"):
+        lines.append(
+            "- a noise model alone does not explain the gap: the reference's "
+            "one-step-ahead errors through it depend on the input (residual-input "
+            f"independence test at 1 %: F = {dep['F']:.2f} > {dep['threshold']:.2f}, "
+            f"p = {dep['p_value']:.2g}), so `{d.effect}` is named with it; what "
+            "the effect's simulation leaves of the gap is that noise (a trend or "
+            "coloured noise on top)"
+        )
     lines += [
         f"- gap before (nominal model): {d.gap_before:.4g} (units of y)",
         f"- gap after (nominal + named effect, fitted on estimation data): "
@@ -236,7 +246,9 @@ def report_markdown(d, name: str = "case", nominal: str | None = None) -> str:
         "2 % of the noise variance (z > 3 for a structural effect against the "
         "re-fit), or a structural effect whose likelihood ratio against the re-fit "
         "on the estimation record exceeds the Bonferroni chi-square threshold and "
-        "that validation confirms (z > 2); see `hamjax.diagnosis.attribute`.",
+        "that validation confirms (z > 2); a noise model is named only where "
+        "its one-step-ahead errors do not depend on the input (open-loop "
+        "records, test at 1 %); see `hamjax.diagnosis.attribute`.",
         "",
     ]
     return "\n".join(lines)

@@ -302,3 +302,78 @@ def feedback_test(
         "lag": int(np.argmax(t)),
         "closed_loop": bool(f > threshold),
     }
+
+
+INPUT_LAGS = 25  # lags 0..24 of the input: the standard residual analysis's count
+INPUT_ALPHA = 0.01  # false-alarm level: a noise model falsified that is the truth
+
+
+def input_dependence(
+    e: np.ndarray,
+    v: np.ndarray,
+    *,
+    lags: int = INPUT_LAGS,
+    order: int = FEEDBACK_AR,
+    alpha: float = INPUT_ALPHA,
+) -> dict:
+    r"""Do a model's one-step-ahead errors `e` depend on the input `v`? The
+    residual-input independence test of residual analysis (Ljung, *System
+    Identification*, 2nd ed., §16.6: the errors' cross-correlation with the
+    input over `lags` lags, as MATLAB's `resid`), with the centred square of
+    the input beside the input itself (Billings and Voon 1986,
+    $\phi_{u^{2\prime}\varepsilon}$: an even unmodelled nonlinearity leaves
+    no linear correlation). The errors are regressed on a constant and
+    $u_{k-i}$, $u^{2\prime}_{k-i}$ for $i = 0 \dots$ `lags` $- 1$
+    ($u = v - \bar v$, $u^{2\prime} = u^2 - \overline{u^2}$), all three
+    prewhitened by the errors' own autoregression of order `order` (least
+    squares, as the null's predictor of `feedback_test`; `order=0`: none): $F = (R^2 / m) /
+    ((1 - R^2) / (N - m - 1))$, $m = 2\,$`lags`.
+
+    *Level.* Where the noise does not depend on the input (an open-loop record)
+    and the model with its noise predictor is adequate, the errors are
+    independent of every input sample; the prewhitening leaves them white
+    where the predictor did not quite (a regression of a coloured series on
+    smooth regressors is spuriously significant: Granger and Newbold 1974), so
+    with Gaussian errors $F$ is about $F(m, N - m - 1)$ and dependence is
+    reported when it exceeds its $1 - \alpha$ quantile (false-alarm rate
+    `alpha`). In closed loop the input is a function of past noise and the test
+    does not apply. Not applicable to a record shorter than $4 m$ samples after
+    the prewhitening, or with a constant input."""
+    from scipy import signal, stats
+
+    e = np.asarray(e, float) - np.mean(e)
+    u = np.asarray(v, float) - np.mean(v)
+    n, m = e.shape[0], 2 * lags
+    if n - order - lags < 4 * m or np.ptp(u) == 0:
+        return {"applicable": False, "why": "record too short or input constant"}
+    if not (np.all(np.isfinite(e)) and np.all(np.isfinite(u))):
+        return {"applicable": False, "why": "the errors or the input are not finite"}
+    a = np.zeros(0)
+    if order > 0:
+        past = np.column_stack([e[order - i : n - i] for i in range(1, order + 1)])
+        a = np.linalg.lstsq(past, e[order:], rcond=None)[0]
+    white = lambda x: signal.lfilter(np.r_[1.0, -a], 1.0, x)[order:]  # noqa: E731
+    e, u2, u = white(e), white(u**2 - np.mean(u**2)), white(u)
+    k = np.arange(lags - 1, e.shape[0])
+    X = np.column_stack(
+        [np.ones(k.shape[0])] + [x[k - i] for x in (u, u2) for i in range(lags)]
+    )
+    target = e[k]
+    beta, _, rank, _ = np.linalg.lstsq(X, target, rcond=None)
+    # the regressors' own count: a held input repeats itself over its lags, a
+    # binary one has a constant square
+    m = int(rank) - 1
+    if m < 1:
+        return {"applicable": False, "why": "the input's lags span nothing"}
+    rss = float(np.sum((target - X @ beta) ** 2))
+    tss = float(np.sum((target - np.mean(target)) ** 2))
+    dof = k.shape[0] - m - 1
+    f = ((tss - rss) / m) / (rss / dof) if rss > 0 else math.inf
+    threshold = float(stats.f.isf(alpha, m, dof))
+    return {
+        "applicable": True,
+        "F": float(f),
+        "threshold": threshold,
+        "p_value": float(stats.f.sf(f, m, dof)),
+        "dependent": bool(f > threshold),
+    }

@@ -53,7 +53,6 @@ from .attribute import (
     nominal_noise,
     reference,
     refit_over_nominal,
-    whitening_predictor,
 )
 from .augmented import Row, uses_feedback, uses_memory, uses_table
 from .fit import LAMBDA0, SUCCESSFUL, RowFit, fit_padded, theta_std
@@ -225,16 +224,15 @@ def judged_row(
     return None
 
 
-def _direction(
-    noise: dict, r_val: np.ndarray, predictor: tuple[str, float]
-) -> tuple[np.ndarray, float]:
-    """The filter's direction in the predictor's parameter, which the
-    prediction-error fits free with the row's (`fit.normal_equations`); zero (the
-    filter fixed) where the filter only stands in for the predictor that
-    `attribute` judges through (the flicker model's, `whitening_predictor`)."""
-    if nominal_noise(noise, r_val)[0].predictor != predictor:
+def _direction(noise_c) -> tuple[np.ndarray, float]:
+    """The filter's direction in the predictor's parameter (the noise candidate
+    `noise_c`'s, `attribute.noise_candidates`), which the prediction-error fits
+    free with the row's (`fit.normal_equations`); zero (the filter fixed) where
+    the filter only stands in for the predictor that `attribute` judges through
+    (the flicker model's: `Candidate.whitening` is not its `predictor`)."""
+    if noise_c.whitening != noise_c.predictor:
         return np.zeros(3), 0.0
-    return noise_direction(predictor[0])
+    return noise_direction(noise_c.predictor[0])
 
 
 def whitening_items(c: int, prep: Prepared, fits: dict) -> list[Item]:
@@ -257,14 +255,15 @@ def whitening_items(c: int, prep: Prepared, fits: dict) -> list[Item]:
     the nominal's, or the re-fit's beside a fitted nominal).
     None of them when the noise model is not significant."""
     _, r_est, r_val = reference(prep, fits)
-    predictor = whitening_predictor(fits["noise"], r_val)
-    if predictor is None:
+    noise_c, significant, _ = nominal_noise(fits["noise"], r_val)
+    if not significant:
         return []
+    predictor = noise_c.whitening  # `attribute.whitening_predictor`
     e_est = predictor_errors(*predictor, r_est)
     sigma, sigma_e = noise_std_differences(r_est), noise_std_differences(e_est)
     ratio = (sigma_e / sigma) ** 2 if sigma > 0 else 1.0
     weight = float(prep.arrays.prior_weight) * ratio
-    direction = _direction(fits["noise"], r_val, predictor)
+    direction = _direction(noise_c)
     noise = NoiseSpec(*noise_filter(*predictor), weight, *direction)
     sse, sse_val, refit, best, lead = leading_rows(prep, fits)
     chosen = min(best.values(), key=lambda k: sse_val[k])

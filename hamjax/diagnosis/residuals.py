@@ -326,8 +326,10 @@ def input_dependence(
     $u_{k-i}$, $u^{2\prime}_{k-i}$ for $i = 0 \dots$ `lags` $- 1$
     ($u = v - \bar v$, $u^{2\prime} = u^2 - \overline{u^2}$), all three
     prewhitened by the errors' own autoregression of order `order` (least
-    squares, as the null's predictor of `feedback_test`; `order=0`: none): $F = (R^2 / m) /
-    ((1 - R^2) / (N - m - 1))$, $m = 2\,$`lags`.
+    squares, as the null's predictor of `feedback_test`; `order=0`: none), and
+    $F = (R^2 / m) / ((1 - R^2) / (N - m - 1))$, $m$ the regressors' rank less
+    the constant's (at most $2\,$`lags`: a held input repeats itself over its
+    lags, a binary one has a constant square).
 
     *Level.* Where the noise does not depend on the input (an open-loop record)
     and the model with its noise predictor is adequate, the errors are
@@ -337,14 +339,14 @@ def input_dependence(
     with Gaussian errors $F$ is about $F(m, N - m - 1)$ and dependence is
     reported when it exceeds its $1 - \alpha$ quantile (false-alarm rate
     `alpha`). In closed loop the input is a function of past noise and the test
-    does not apply. Not applicable to a record shorter than $4 m$ samples after
-    the prewhitening, or with a constant input."""
+    does not apply. Not applicable to a record shorter than $8\,$`lags`
+    samples after the prewhitening, or with a constant input."""
     from scipy import signal, stats
 
     e = np.asarray(e, float) - np.mean(e)
     u = np.asarray(v, float) - np.mean(v)
-    n, m = e.shape[0], 2 * lags
-    if n - order - lags < 4 * m or np.ptp(u) == 0:
+    n = e.shape[0]
+    if n - order - lags < 8 * lags or np.ptp(u) == 0:
         return {"applicable": False, "why": "record too short or input constant"}
     if not (np.all(np.isfinite(e)) and np.all(np.isfinite(u))):
         return {"applicable": False, "why": "the errors or the input are not finite"}
@@ -360,9 +362,7 @@ def input_dependence(
     )
     target = e[k]
     beta, _, rank, _ = np.linalg.lstsq(X, target, rcond=None)
-    # the regressors' own count: a held input repeats itself over its lags, a
-    # binary one has a constant square
-    m = int(rank) - 1
+    m = int(rank) - 1  # the regressors' own count (docstring)
     if m < 1:
         return {"applicable": False, "why": "the input's lags span nothing"}
     rss = float(np.sum((target - X @ beta) ** 2))

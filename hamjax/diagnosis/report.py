@@ -196,7 +196,10 @@ def report_markdown(d, name: str = "case", nominal: str | None = None) -> str:
             "- a noise model alone does not explain the gap: the reference's "
             "one-step-ahead errors through it depend on the input (residual-input "
             f"independence test at 1 %: F = {dep['F']:.2f} > {dep['threshold']:.2f}, "
-            f"p = {dep['p_value']:.2g}), so `{d.effect}` is named with it; what "
+            f"p = {dep['p_value']:.2g}; what the input explains has "
+            f"{dep.get('explained', float('nan')):.2g} times the variance of the "
+            "rest), "
+            f"so `{d.effect}` is named with it; what "
             "the effect's simulation leaves of the gap is that noise (a trend or "
             "coloured noise on top)"
         )

@@ -315,6 +315,7 @@ def input_dependence(
     lags: int = INPUT_LAGS,
     order: int = FEEDBACK_AR,
     alpha: float = INPUT_ALPHA,
+    material: float = 0.0,
 ) -> dict:
     r"""Do a model's one-step-ahead errors `e` depend on the input `v`? The
     residual-input independence test of residual analysis (Ljung, *System
@@ -338,8 +339,11 @@ def input_dependence(
     smooth regressors is spuriously significant: Granger and Newbold 1974), so
     with Gaussian errors $F$ is about $F(m, N - m - 1)$ and dependence is
     reported when it exceeds its $1 - \alpha$ quantile (false-alarm rate
-    `alpha`). In closed loop the input is a function of past noise and the test
-    does not apply. Not applicable to a record shorter than $8\,$`lags`
+    `alpha`). `material`: the variance the input explains must also exceed
+    this multiple of the variance it leaves (`explained`, the unbiased
+    estimate $(F - 1)\,m / n$, $n$ the regression's rows), as every step of
+    the diagnosis's rule asks an improvement to exceed a share of the noise. In closed loop
+    the input is a function of past noise and the test does not apply. Not applicable to a record shorter than $8\,$`lags`
     samples after the prewhitening, or with a constant input."""
     from scipy import signal, stats
 
@@ -370,10 +374,12 @@ def input_dependence(
     dof = k.shape[0] - m - 1
     f = ((tss - rss) / m) / (rss / dof) if rss > 0 else math.inf
     threshold = float(stats.f.isf(alpha, m, dof))
+    explained = (f - 1.0) * m / k.shape[0]
     return {
         "applicable": True,
         "F": float(f),
         "threshold": threshold,
         "p_value": float(stats.f.sf(f, m, dof)),
-        "dependent": bool(f > threshold),
+        "explained": float(explained),
+        "dependent": bool(f > threshold and explained > material),
     }

@@ -170,14 +170,42 @@ def test_the_report_says_why_an_effect_stands_beside_a_noise_model():
             "F": 3.25,
             "threshold": 1.55,
             "p_value": 1e-9,
+            "explained": 0.125,
             "dependent": True,
         }
     }
     text = report_markdown(d)
     assert "a noise model alone does not explain the gap" in text
     assert "F = 3.25 > 1.55" in text and "`backlash` is named with it" in text
+    assert "what the input explains has 0.12 times the variance" in text
     # a noise model named, or a test that does not reject: nothing said
     d.tests["input_dependence"]["dependent"] = False
     assert "a noise model alone" not in report_markdown(d)
     d.tests["input_dependence"]["dependent"], d.effect = True, "drift"
     assert "a noise model alone" not in report_markdown(d)
+
+
+def test_a_dependence_too_small_to_matter_is_not_reported():
+    # a nominal off by 0.1 of the noise std (its output effect, linear in the
+    # input): significant on long records, but what it explains has about 1 %
+    # of the noise's variance, under the rule's 2 % (RHO); the ratio's estimate
+    # (F - 1) m / n is unbiased, so without dependence it averages 0 within
+    # its standard error
+    from hamjax.diagnosis.attribute import RHO
+
+    significant_, material, shares, null = 0, 0, [], []
+    n = 4000
+    for i in range(40):
+        rng = np.random.default_rng([37, i])
+        v = signal.lfilter([0.1], [1.0, -0.9], rng.standard_normal(n))
+        w = signal.lfilter([0.0, 0.3], [1.0, -0.7], v)
+        e = rng.standard_normal(n)
+        out = input_dependence(e + 0.1 * w / w.std(), v, material=RHO)
+        significant_ += out["F"] > out["threshold"]
+        material += out["dependent"]
+        shares.append(out["explained"])
+        null.append(input_dependence(e, v)["explained"])
+    assert significant_ >= 10, significant_  # the test sees it ...
+    assert material <= 2, material  # ... the rule does not act on it
+    assert abs(np.mean(shares) - 0.01) < 0.005, np.mean(shares)
+    assert abs(np.mean(null)) < 3 * np.std(null) / np.sqrt(len(null))

@@ -198,10 +198,9 @@ def report_markdown(d, name: str = "case", nominal: str | None = None) -> str:
             f"independence test at 1 %: F = {dep['F']:.2f} > {dep['threshold']:.2f}, "
             f"p = {dep['p_value']:.2g}; what the input explains has "
             f"{dep.get('explained', float('nan')):.2g} times the variance of the "
-            "rest), "
-            f"so `{d.effect}` is named with it; what "
-            "the effect's simulation leaves of the gap is that noise (a trend or "
-            "coloured noise on top)"
+            f"rest), so `{d.effect}` is named with it; what the effect's "
+            "simulation leaves of the gap is that noise (a trend or coloured "
+            "noise on top)"
         )
     lines += [
         f"- gap before (nominal model): {d.gap_before:.4g} (units of y)",

@@ -342,9 +342,10 @@ def input_dependence(
     `alpha`). `material`: the variance the input explains must also exceed
     this multiple of the variance it leaves (`explained`, the unbiased
     estimate $(F - 1)\,m / n$, $n$ the regression's rows), as every step of
-    the diagnosis's rule asks an improvement to exceed a share of the noise. In closed loop
-    the input is a function of past noise and the test does not apply. Not applicable to a record shorter than $8\,$`lags`
-    samples after the prewhitening, or with a constant input."""
+    the diagnosis's rule asks an improvement to exceed a share of the noise.
+    In closed loop the input is a function of past noise and the test does
+    not apply. Not applicable to a record shorter than $8\,$`lags` samples
+    after the prewhitening, or with a constant input."""
     from scipy import signal, stats
 
     e = np.asarray(e, float) - np.mean(e)

@@ -936,20 +936,26 @@ def nominal_noise(
     return c, ok, z
 
 
+def whitening_noise(noise: dict[str, Candidate], r_ref: np.ndarray) -> Candidate | None:
+    """The case's significant noise model (`noise`: `noise_candidates`), whose
+    `whitening` is the filter $A(q)$ (`noise_fit.noise_filter`) through which
+    `schedule` re-fits the deterministic candidates by prediction error; None
+    when the reference's validation residual `r_ref` (`reference`) has no
+    significant noise model."""
+    c, ok, _ = nominal_noise(noise, r_ref)
+    return c if ok else None
+
+
 def whitening_predictor(
     noise: dict[str, Candidate], r_ref: np.ndarray
 ) -> tuple[str, float] | None:
-    """`(name, value)` of the case's significant noise predictor (`noise`:
-    `noise_candidates`), the filter $A(q)$ (`noise_fit.noise_filter`) through
-    which `schedule` re-fits the deterministic candidates by prediction error
-    (`attribute` judges them through the predictor itself, `one_step_errors`:
-    the same but for the flicker model, which has no finite filter and is
-    replaced here by its low-order stand-in); None when the reference's
-    validation residual `r_ref` (`reference`) has no significant noise model."""
-    c, ok, _ = nominal_noise(noise, r_ref)
-    # `noise_candidates` sets `whitening` on every noise model: its predictor,
-    # or the flicker model's low-order stand-in
-    return c.whitening if ok else None
+    """`(name, value)` of `whitening_noise`'s filter: its predictor (`attribute`
+    judges the candidates through the predictor itself, `one_step_errors`), or
+    for the flicker model, which has no finite filter, its low-order stand-in
+    (`noise_candidates` sets `whitening` on every noise model); None without a
+    significant noise model."""
+    c = whitening_noise(noise, r_ref)
+    return None if c is None else c.whitening
 
 
 def attribute(prep: Prepared, fit: dict) -> Attribution:
@@ -1054,23 +1060,27 @@ def attribute(prep: Prepared, fit: dict) -> Attribution:
             # judged against the reference (module docstring)
             effect, chosen = "none", None
 
-    def depends_on_input(noise_c: Candidate) -> dict | None:
-        # the reference with the noise model falsified? (module docstring)
-        out = _input_dependence(prep, through(noise_c))
+    def depends_on_input(ref_c: Candidate) -> dict | None:
+        # the reference (`through`) with the noise model falsified? (module
+        # docstring)
+        out = _input_dependence(prep, ref_c)
         if out is not None:
             tests["input_dependence"] = out
         return out
 
-    def judged_through(noise_c: Candidate, depends: dict | None) -> Candidate | None:
-        # the deterministic class through the noise predictor (`_gap_through_noise`),
-        # its output-error fit (which simulates), or None: the noise model
+    def judged_through(
+        noise_c: Candidate, ref_c: Candidate, depends: dict | None
+    ) -> Candidate | None:
+        # the deterministic class through the noise predictor (`_gap_through_noise`;
+        # `ref_c` the reference through it), its output-error fit (which
+        # simulates), or None: the noise model
         det_pe = [
             cands_pe[c.effect]
             for c in det
             if not (refit_ref and c.effect == "parameter_mismatch")
         ]
         named = _gap_through_noise(
-            through(noise_c),
+            ref_c,
             cands_pe,
             det_pe,
             sig,
@@ -1088,7 +1098,8 @@ def attribute(prep: Prepared, fit: dict) -> Attribution:
         if n_sig:
             effect, chosen = noise_c.effect, noise_c
             if THROUGH_NOISE:
-                named = judged_through(noise_c, depends_on_input(noise_c))
+                ref_c = through(noise_c)
+                named = judged_through(noise_c, ref_c, depends_on_input(ref_c))
                 if named is not None:
                     effect, chosen = named.effect, named
     gap_before, gap_after, floor, shrink = gaps(r_before, chosen)
@@ -1107,7 +1118,8 @@ def attribute(prep: Prepared, fit: dict) -> Attribution:
     if chosen is not None and chosen.measure == "simulation" and shrink < 0.8:
         noise_c, n_sig = noise_test()
         if n_sig and noise_c.gap_after < gap_after:
-            test = _over_noise(through(noise_c), cands_pe[chosen.effect].residual, sig)
+            ref_c = through(noise_c)
+            test = _over_noise(ref_c, cands_pe[chosen.effect].residual, sig)
             tests["deterministic_over_noise"] = test
             if not test["significant"] and chosen.effect != "parameter_mismatch":
                 # or by likelihood: over the re-fit, both by prediction error
@@ -1126,13 +1138,13 @@ def attribute(prep: Prepared, fit: dict) -> Attribution:
                         test["by"] = "likelihood_ratio"
             depends = None
             if not test["significant"] and THROUGH_NOISE:
-                depends = depends_on_input(noise_c)
+                depends = depends_on_input(ref_c)
             if depends is not None and depends["dependent"]:
                 # the noise model alone is falsified: the class as judged
                 # through its predictor, named whatever its simulation closes
                 # (what it leaves is the noise model's, as below)
                 test["kept_by"] = "input_dependence"
-                named = judged_through(noise_c, depends)
+                named = judged_through(noise_c, ref_c, depends)
                 if named is not None:
                     chosen = named
                     gap_before, gap_after, floor, shrink = gaps(r_before, chosen)

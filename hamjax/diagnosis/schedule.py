@@ -48,11 +48,12 @@ import numpy as np
 
 from ..simulation.sharding import effective_chunk
 from .attribute import (
+    Candidate,
     lr_over_refit,
     noise_candidates,
-    nominal_noise,
     reference,
     refit_over_nominal,
+    whitening_noise,
 )
 from .augmented import Row, uses_feedback, uses_memory, uses_table
 from .fit import LAMBDA0, SUCCESSFUL, RowFit, fit_padded, theta_std
@@ -224,7 +225,7 @@ def judged_row(
     return None
 
 
-def _direction(noise_c) -> tuple[np.ndarray, float]:
+def _direction(noise_c: Candidate) -> tuple[np.ndarray, float]:
     """The filter's direction in the predictor's parameter (the noise candidate
     `noise_c`'s, `attribute.noise_candidates`), which the prediction-error fits
     free with the row's (`fit.normal_equations`); zero (the filter fixed) where
@@ -239,7 +240,7 @@ def whitening_items(c: int, prep: Prepared, fits: dict) -> list[Item]:
     """The prediction-error fits of case `c`, once its rows are finished: when the
     reference's residual (the nominal's, or the re-fit's beside a fitted nominal:
     `attribute.reference`) has a significant noise model ($A(q)$,
-    `attribute.whitening_predictor` of `fits["noise"]`), the best rows of the
+    `attribute.whitening_noise` of `fits["noise"]`), the best rows of the
     re-fit, of the
     `CONTINUE_CLASSES` leading structural classes (by estimation SSE, as in
     `finishing_items`) and of the class of least validation error again, each
@@ -255,10 +256,10 @@ def whitening_items(c: int, prep: Prepared, fits: dict) -> list[Item]:
     the nominal's, or the re-fit's beside a fitted nominal).
     None of them when the noise model is not significant."""
     _, r_est, r_val = reference(prep, fits)
-    noise_c, significant, _ = nominal_noise(fits["noise"], r_val)
-    if not significant:
+    noise_c = whitening_noise(fits["noise"], r_val)
+    if noise_c is None:
         return []
-    predictor = noise_c.whitening  # `attribute.whitening_predictor`
+    predictor = noise_c.whitening
     e_est = predictor_errors(*predictor, r_est)
     sigma, sigma_e = noise_std_differences(r_est), noise_std_differences(e_est)
     ratio = (sigma_e / sigma) ** 2 if sigma > 0 else 1.0

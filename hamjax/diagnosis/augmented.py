@@ -378,7 +378,7 @@ def memory_scan(
     scan; chains over blocks like `filter_scan`). A zero slide jump leaves the
     play's arithmetic as it is. `table=False` skips the nominal backlash (exact
     unless the case has one)."""
-    max_step, width, jump, slide, nominal = memory_arguments(p, case)
+    max_step, width, jump, slide, _, nominal = memory_arguments(p, case)
 
     def step(carry, vk, with_nominal):
         x_prev, xb, ss, bl = carry
@@ -400,9 +400,11 @@ def memory_scan(
 
 def memory_init(v0: Float[Array, ""], p: Float[Array, " S"], case: CaseArrays):
     """The state of `memory_scan` at rest at its first input $v_0$: the rate
-    limit and the play at $v_0$ (centred in the play), the slide stuck there
-    (`slide_init`), the nominal backlash centred in its play."""
-    return (v0, v0, slide_init(v0), memory_arguments(p, case)[-1].init(v0))
+    limit at $v_0$, the play at $v_0 + \\delta$ (`valve_start`; centred at
+    $\\delta = 0$), the slide stuck there (`slide_init`), the nominal backlash
+    centred in its play."""
+    *_, start, nominal = memory_arguments(p, case)
+    return (v0, v0 + start, slide_init(v0 + start), nominal.init(v0))
 
 
 def input_memory(
@@ -467,8 +469,9 @@ def filter_coefficients(p: Float[Array, " S"], case: CaseArrays) -> tuple[Array,
 
 
 def memory_arguments(p: Float[Array, " S"], case: CaseArrays) -> tuple:
-    """`(max_step, width, jump, slide, nominal)` of the input-memory scan (rate
-    limit per sample, play with its slip or slide jump, the nominal backlash)."""
+    """`(max_step, width, jump, slide, start, nominal)` of the input-memory scan
+    (rate limit per sample, play with its slip or slide jump and its start, the
+    nominal backlash)."""
     at = named(p, case)
     nominal = NominalBacklash(
         at("in_scale"),
@@ -479,7 +482,7 @@ def memory_arguments(p: Float[Array, " S"], case: CaseArrays) -> tuple:
         case.nl_kind == NL_BACKLASH,
     )
     jumps = at("backlash"), at("slip_jump"), at("slide_jump")
-    return at("rate") * case.dt, *jumps, nominal
+    return at("rate") * case.dt, *jumps, at("valve_start"), nominal
 
 
 def static_part(

@@ -36,9 +36,11 @@ from .augmented import (
     linear_part,
     memory_init,
     memory_scan,
+    n_max_of,
     output_part,
     output_play_scan,
     simulate_with_filter,
+    slot_index,
     static_part,
     switch,
     uses_feedback,
@@ -521,3 +523,62 @@ def fit_batch(
     flags = {"memory": memory, "table": table, "feedback": feedback, "whiten": whiten}
     kind = "sharded" if sharded else "one"
     return PROGRAMS.get(kind, args, flags, while_compiling)(*args)
+
+
+# starts of the valve tried on the validation record, in each of
+# `VALIDATION_STAGES` searches, each within a step of the last one's best
+VALIDATION_STARTS = 32
+VALIDATION_STAGES = 3
+
+
+def _starts_on_validation(
+    p: Float[Array, " S"], tau: Int[Array, ""], case: CaseArrays
+) -> Float[Array, " L"]:
+    """`simulate_with_filter` on the validation record at `p`, the valve started
+    at each of `VALIDATION_STARTS` points within the play's width $c$ of $v_0$
+    (`valve_start` from $-c$ to $c$), then at as many within a step of the
+    best, `VALIDATION_STAGES` times (an integrating process makes the start a
+    needle): the output whose masked SSE is least."""
+    n_max = n_max_of(p.shape[0])
+    start, width = slot_index("valve_start", n_max), p[slot_index("backlash", n_max)]
+    b, a = filter_coefficients(p, case)
+    grid = jnp.linspace(-1.0, 1.0, VALIDATION_STARTS)
+
+    def best(deltas):
+        runs = jax.vmap(
+            lambda d: simulate_with_filter(
+                p.at[start].set(d), b, a, tau, case.v_val, case, True, True, True
+            )
+        )(deltas)
+        sse = jnp.sum(case.m_val[None] * (runs - case.y_val[None]) ** 2, axis=-1)
+        k = jnp.argmin(jnp.where(jnp.isfinite(sse), sse, jnp.inf))
+        return deltas[k], runs[k]
+
+    d, span = jnp.zeros(()), jnp.abs(width)
+    for _ in range(VALIDATION_STAGES):
+        d, y = best(d + grid * span)
+        span = 2.0 * span / (VALIDATION_STARTS - 1)  # a step of this search
+    return y
+
+
+_starts_on_validations = jax.jit(jax.vmap(_starts_on_validation, (0, 0, None)))
+
+
+def frees_valve_start(row: Row) -> bool:
+    """Whether the row fits the valve's start (`valve_start`: the stick-slip
+    profile's starts)."""
+    free = np.asarray(row.free)
+    return bool(free[slot_index("valve_start", n_max_of(free.shape[-1]))])
+
+
+def validation_start(params: np.ndarray, rows: list, case: CaseArrays) -> np.ndarray:
+    """The validation outputs `(R, L)` of rows that fit the valve's start
+    (`frees_valve_start`) at their fitted `params` `(R, S)`, each with the
+    validation record's own start: as the estimation record's, that is an
+    initial state (where the valve was stuck when the record began), estimated
+    there by the least simulation SSE over `VALIDATION_STARTS` starts within
+    the play's width of $v_0$, then as many within a step of the best, and so
+    on (`_starts_on_validation`, the rows in one call). One parameter; the
+    other rows start from rest, as the contract's simulations do."""
+    taus = jnp.asarray(np.array([int(r.tau) for r in rows]))
+    return np.asarray(_starts_on_validations(jnp.asarray(params), taus, case))

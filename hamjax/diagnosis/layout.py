@@ -77,7 +77,7 @@ BUCKETS = (256, 512, 1024, 1536, 2048, 3072, 4096, 6144, 8192, 12288, 16384)
 ONE_GROUP = 8192
 N_MAX = 4
 T_MAX = 64
-MAX_EFFECT_SLOTS = 2  # most slots any one candidate row frees
+MAX_EFFECT_SLOTS = 3  # most slots any one candidate row frees
 # the highest order of the linear block `nominal_fit` selects, which a
 # `REFIT_LINEAR` row re-fits whatever order was selected (the selection assumed
 # a linear output map too)
@@ -108,8 +108,13 @@ NOMINAL_UNCERTAINTY = 0.2  # default relative std of the nominal parameters
 # slip, the SSE is not a needle in f_s, and the plain starts serve as before.
 STATIC_BAND_GRID = tuple(0.5 * 2.0 ** (-k / 64) for k in range(362))
 KINETIC_RATIOS = tuple(0.9 * 2.0 ** (-k / 3) for k in range(17))
+# the slot of each stick-slip variant's jump: He et al.'s slip, Choudhury et al.'s slide
+VARIANTS = ("slip_jump", "slide_jump")
 PROFILE_CHUNK = 512  # grid points simulated at once (memory: chunk x length)
-PROFILE_STARTS = 2  # best profile points kept as starts of the backlash rows
+PROFILE_STARTS = 2  # best grid points kept per variant (and map) of the profile
+# the profile's starts of the backlash rows: the two best of the refined points
+# (`REFINE_SPANS`) and the grid's second best as it is (`stick_slip_profile`)
+PROFILE_POINTS = 3
 # Beside a fitted nominal, passes of the profile's denominator re-fit (variable
 # projection at the best point, then the grid again near it: `stick_slip_profile`)
 # and the window of that local grid, in steps of `STATIC_BAND_GRID` either side
@@ -117,6 +122,18 @@ PROFILE_STARTS = 2  # best profile points kept as starts of the backlash rows
 DENOMINATOR_PASSES = 2
 LOCAL_STEPS = 16
 DENOMINATOR_EVALUATIONS = 100  # residual evaluations of one variable-projection fit
+# The profile's best points refined by coordinate search (`stick_slip_profile`):
+# S, then J, each over `PROFILE_CHUNK` geometric steps within these factors either
+# side, then the valve's start (`valve_start`) within S times (factor - 1) / (2**0.5
+# - 1) of it, a pass per factor (the first covers the grid's spacing in f_d, and
+# starts within S of v_0)
+REFINE_SPANS = (2.0**0.5, 2.0**0.125, 2.0 ** (1 / 32))
+START_REACH = 1.1  # the start's first line reaches this many S either side
+# beside an integrating nominal, the refinement on the record itself (after the
+# differenced record's) with a first pass twice as wide: the differenced record
+# places (S, J) more roughly (its noise is twice the record's, its signal a rate)
+INTEGRATING_SPANS = (2.0, *REFINE_SPANS)
+INTEGRATOR_TOLERANCE = 1e-6  # a pole this close to 1 is an integrator's
 
 
 def prior_weight(uncertainty: float | None, noise_std: float) -> float:
@@ -141,10 +158,6 @@ def prior_weight(uncertainty: float | None, noise_std: float) -> float:
     return max(PRIOR_FLOOR, (noise_std * RELATIVE_STEP / uncertainty) ** 2)
 
 
-# the slot of each stick-slip variant's jump: He et al.'s slip, Choudhury et al.'s slide
-VARIANTS = ("slip_jump", "slide_jump")
-
-
 def _valve_step(slide: bool, width, jump):
     """The step `((x_prev, y, slide state), v_k) -> (v_k, y_k, state)` of the
     stick-slip play (`stick_slip_step`) or, for `slide`, Choudhury's valve
@@ -161,10 +174,11 @@ def _valve_step(slide: bool, width, jump):
     return step
 
 
-def _valve_init(v0, width):
-    """`_valve_step`'s carry at the start: at rest at $v_0$, as in the augmented
-    model (`augmented.memory_init`)."""
-    x0 = jnp.full(width.shape, v0)
+def _valve_init(v0, width, start=None):
+    """`_valve_step`'s carry at the start: at rest at $v_0$ plus `start` (each grid
+    point's $\\delta$, `valve_start`; None: 0), as in the augmented model
+    (`augmented.memory_init`)."""
+    x0 = jnp.full(width.shape, v0) + (0.0 if start is None else start)
     return v0, x0, slide_init(x0)
 
 
@@ -173,19 +187,20 @@ def _valve_positions(
     v: Float[Array, " L"],
     width: Float[Array, " G"],
     jump: Float[Array, " G"],
+    start: Float[Array, " G"] | None = None,
     *,
     slide: bool,
 ) -> Float[Array, "G L"]:
-    """The valve positions of each (S, J) over `v` (`_valve_step`). One scan over
-    time with the grid as its state's vector (three times faster than a scan per
-    grid point under `vmap`)."""
+    """The valve positions of each (S, J) over `v` (`_valve_step`), started at
+    $v_0$ + `start` (None: 0). One scan over time with the grid as its state's
+    vector (three times faster than a scan per grid point under `vmap`)."""
     step = _valve_step(slide, width, jump)
 
     def body(carry, vk):
         carry = step(carry, vk)
         return carry, carry[1]
 
-    return lax.scan(body, _valve_init(v[0], width), v)[1].T
+    return lax.scan(body, _valve_init(v[0], width, start), v)[1].T
 
 
 PROFILE_BLOCK = 512  # time steps per call of `_profile_block`: one compilation
@@ -269,6 +284,7 @@ def _profile_sums(
     slide: bool,
     mapped: tuple[bool, ...],
     depth: int,
+    start: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     r"""The lagged sums of the profile's least squares (`_free_numerator_sse`)
     for each (S, J) and each map of `mapped` (True: the nominal's
@@ -277,7 +293,7 @@ def _profile_sums(
 
     One scan over time (`_profile_block`, `PROFILE_BLOCK` steps a call, the
     record padded to whole blocks) that never holds a grid x time array: the
-    valve (`_valve_step`, at rest at $v_0$), its input $u = F(x)$ filtered by
+    valve (`_valve_step`, at rest at $v_0$ + `start`), its input $u = F(x)$ filtered by
     $1/A$ ($a_0 = 1$, direct form II transposed from rest, as `lfilter_numpy`)
     and, with $w_i = u_{k-i}$ for the lags $i < D$ (zero before the start), the
     sums over the record of $w_i w_j$, $w_i y_k$ and $w_i$; of the first and
@@ -294,7 +310,9 @@ def _profile_sums(
         a = np.r_[a, 0.0]
     shape = (len(mapped), width.shape[0])
     carry = (  # as JAX arrays, as the blocks return it: one compilation
-        _valve_init(jnp.asarray(v[0]), width),
+        _valve_init(
+            jnp.asarray(v[0]), width, None if start is None else jnp.asarray(start)
+        ),
         jnp.zeros((a.shape[0] - 1, *shape)),
         jnp.zeros((depth, *shape)),
         jnp.zeros((depth, *shape)),
@@ -334,11 +352,12 @@ def stick_slip_profile(
     *,
     refit_linear: bool = False,
 ) -> tuple[tuple[float, float, dict, str], ...]:
-    r"""The `PROFILE_STARTS` best $(S, J, \text{re-fit start}, \text{slot})$ over
-    both stick-slip variants (`VARIANTS`: the jump's slot) on the grid
-    `STATIC_BAND_GRID` x `KINETIC_RATIOS` ($S = f_s + f_d$, $J = f_s - f_d$ for
-    both: the same reversal band $S$ and sliding offset $f_d = (S - J)/2$), best
-    first.
+    r"""The `PROFILE_POINTS` starts $(S, J, \text{re-fit start}, \text{slot})$ of
+    the backlash rows from the grid `STATIC_BAND_GRID` x `KINETIC_RATIOS` over
+    both stick-slip variants (`VARIANTS`: the jump's slot; $S = f_s + f_d$, $J =
+    f_s - f_d$ for both: the same reversal band $S$ and sliding offset $f_d = (S
+    - J)/2$): the two best of each variant's best point refined (below), best
+    first, then the grid's second best point as it is.
 
     Each grid point is scored by separable least squares (Jelali 2008, valve
     stiction by a global search over the stiction parameters with the linear
@@ -380,6 +399,29 @@ def stick_slip_profile(
     The exact steps' instants of slip move only with $f_s$ (and $J$), where the
     fit has no derivative; this search places them (and $f_d$ near its value)
     before the Levenberg-Marquardt fit, which then moves $f_d$ and the re-fit.
+    In a closed loop the SSE is a needle in $S$ and in $J$ both (the command
+    stops by a hair past each slip), narrower than the grid's steps in $f_d$:
+    each variant's best point is refined by coordinate search, a line in $S$,
+    one in $J$ and one in the valve's start $\delta$ (`valve_start`: where the
+    record finds the valve stuck, which the start returns; the grid has it at
+    0, centred at $v_0$), each of `PROFILE_CHUNK` points, on ever finer spans
+    (`REFINE_SPANS`; on the control-loop benchmark's seed 2, case 75, the best
+    point's estimation RMS fell from 0.137 to 0.075, the true valve's 0.077
+    under the same $A$).
+
+    Beside a nominal with an integrator (a pole at 1 within
+    `INTEGRATOR_TOLERANCE`: a level loop, a position) a valve stuck off $v_0$
+    at the start drives a ramp until its first slip, and the SSE is a needle
+    in $\delta$ too (a hundredth of the band wide): scored at $\delta = 0$ the
+    grid may rank the truth far down. There a second basin is searched: the
+    grid, the denominator's re-fit and the refinement in $S$ and $J$ on the
+    differenced record $\Delta y$ through $A / (1 - q^{-1})$, where that start
+    leaves a level only until the first slip, each variant's point then
+    refined on the record itself with $A$, the start first
+    (`INTEGRATING_SPANS`); the two best refined points of both basins, by the
+    record's SSE, are the first two starts. (The differenced record alone,
+    whose noise is twice the record's and whose signal is a rate, lost loops
+    whose band the record's grid had found.)
     `length`: the padded record length (one compilation per length)."""
     n = v.shape[0]
     vr = float(max(np.ptp(v), 1e-12))
@@ -397,8 +439,11 @@ def stick_slip_profile(
     def padded(x):  # G <= PROFILE_CHUNK grid points padded to it: one shape
         return np.pad(x, (0, PROFILE_CHUNK - x.shape[0]), mode="edge")
 
-    def valves(S, J, slot):  # (G, n)
-        x = _valve_positions(vp, padded(S), padded(J), slide=slot == "slide_jump")
+    def valves(S, J, slot, d=None):  # (G, n)
+        d = np.zeros(S.shape[0]) if d is None else d
+        x = _valve_positions(
+            vp, padded(S), padded(J), padded(d), slide=slot == "slide_jump"
+        )
         return np.asarray(x)[: S.shape[0], :n]
 
     def mapped_input(x):  # F(x) of each grid point's valve positions, (G, n)
@@ -408,73 +453,135 @@ def stick_slip_profile(
             return np.stack([_static_numpy(nom, xi) for xi in x])
         return _static_numpy(nom, x)  # elementwise: every row at once
 
-    def score(a, fs, fd, maps):  # the best points of each variant and map
+    def sums(a, t, S, J, slot, maps, d=None):  # SSE, numerator of each point
+        d = np.zeros(S.shape[0]) if d is None else d  # `t`: the target output
+        sse = {m: np.empty(S.shape[0]) for m in maps}
+        width = lags.shape[0] + int(refit_linear)
+        b = {m: np.empty((S.shape[0], width)) for m in maps}
+        for i in range(0, S.shape[0], PROFILE_CHUNK):
+            c = slice(i, i + PROFILE_CHUNK)
+            if fused:  # both maps in one scan (`_profile_sums`)
+                gram, rhs, total = _profile_sums(
+                    v,
+                    t,
+                    padded(S[c]),
+                    padded(J[c]),
+                    a,
+                    nom.pl,
+                    slide=slot == "slide_jump",
+                    mapped=tuple(m and nom.nl_kind == NL_PIECEWISE for m in maps),
+                    depth=int(lags[-1]) + 1,
+                    start=padded(d[c]),
+                )
+                k = S[c].shape[0]
+                gram, rhs, total = (g[:, :k] for g in (gram, rhs, total))
+                for j, m in enumerate(maps):
+                    sse[m][c], b[m][c] = _solve_lagged(
+                        gram[j], rhs[j], total[j], t, lags, level=refit_linear
+                    )
+                continue
+            x = valves(S[c], J[c], slot, d[c])
+            for m in maps:  # the valve positions once for both maps
+                u = lfilter_numpy(_ONE, a, mapped_input(x) if m else x)
+                sse[m][c], b[m][c] = _free_numerator_sse(u, t, lags, level=refit_linear)
+        return sse, b
+
+    def score(a, t, fs, fd, maps):  # the best points of each variant and map
         found = []
         for slot in VARIANTS:
-            sse = {m: np.empty(fs.shape[0]) for m in maps}
-            width = lags.shape[0] + int(refit_linear)
-            b = {m: np.empty((fs.shape[0], width)) for m in maps}
-            for i in range(0, fs.shape[0], PROFILE_CHUNK):
-                c = slice(i, i + PROFILE_CHUNK)
-                S, J = fs[c] + fd[c], fs[c] - fd[c]
-                if fused:  # both maps in one scan (`_profile_sums`)
-                    gram, rhs, total = _profile_sums(
-                        v,
-                        y,
-                        padded(S),
-                        padded(J),
-                        a,
-                        nom.pl,
-                        slide=slot == "slide_jump",
-                        mapped=tuple(m and nom.nl_kind == NL_PIECEWISE for m in maps),
-                        depth=int(lags[-1]) + 1,
-                    )
-                    gram, rhs, total = (g[:, : S.shape[0]] for g in (gram, rhs, total))
-                    for k, m in enumerate(maps):
-                        sse[m][c], b[m][c] = _solve_lagged(
-                            gram[k], rhs[k], total[k], y, lags, level=refit_linear
-                        )
-                    continue
-                x = valves(S, J, slot)
-                for m in maps:  # the valve positions once for both maps
-                    u = lfilter_numpy(_ONE, a, mapped_input(x) if m else x)
-                    sse[m][c], b[m][c] = _free_numerator_sse(
-                        u, y, lags, level=refit_linear
-                    )
+            sse, b = sums(a, t, fs + fd, fs - fd, slot, maps)
             for m in maps:
                 e = np.where(np.isfinite(sse[m]), sse[m], np.inf)
                 best = np.argsort(e, kind="stable")[:PROFILE_STARTS]
                 found += [
-                    (e[i], fs[i] + fd[i], fs[i] - fd[i], b[m][i], m, slot) for i in best
+                    (e[i], fs[i] + fd[i], fs[i] - fd[i], b[m][i], m, slot, 0.0)
+                    for i in best
                 ]
         found.sort(key=lambda f: f[0])  # stable: the He variant first on ties
         return found
 
-    a = a_nom
-    found = score(a, fs, fd, maps)
-    for k in range(DENOMINATOR_PASSES if refit_linear else 0):
-        sse0, S0, J0, _, mapped, _ = found[0]
-        if not mapped:  # its start, the map's slots, keeps the nominal's A
-            break
-        u = mapped_input(valves(np.array([S0]), np.array([J0]), found[0][5]))[0]
-        a_new = _refit_denominator(u, y, a, lags, level=True)
-        if a_new is None:
-            break
-        f0 = (S0 + J0) / 2
-        steps = LOCAL_STEPS * (4 if k == 0 else 1)  # the first: A moved f_s
-        near = np.abs(np.log(fs / f0)) <= (steps + 0.5) * np.log(2.0) / 64
-        again = score(a_new, fs[near], fd[near], [True])
-        if not again[0][0] < sse0:
-            break
-        a, found = a_new, again
+    def refine(a, t, point, lines, spans=REFINE_SPANS):  # on finer lines
+        e, S, J, b, m, slot, d = point
+        for span in spans:
+            g = np.exp(np.linspace(-np.log(span), np.log(span), PROFILE_CHUNK))
+            # the start's line: within S of it on the first pass, then narrower
+            # as the others
+            h = np.linspace(-1.0, 1.0, PROFILE_CHUNK) * (span - 1.0)
+            h = START_REACH * h / (REFINE_SPANS[0] - 1.0)
+            for line in lines:
+                one = np.ones(PROFILE_CHUNK)
+                SS = S * g if line == "S" else S * one
+                JJ = np.minimum(J * g if line == "J" else J * one, SS)  # f_d >= 0
+                dd = d + S * h if line == "start" else d * one
+                sse, bb = sums(a, t, SS, JJ, slot, [m], dd)
+                i = int(np.argmin(np.where(np.isfinite(sse[m]), sse[m], np.inf)))
+                if sse[m][i] < e:
+                    e, S, J, d, b = sse[m][i], SS[i], JJ[i], dd[i], bb[m][i]
+        return e, S, J, b, m, slot, d
+
+    def rescored(a, t, point):  # the point's SSE and numerator on `t`
+        _, S, J, _, m, slot, d = point
+        sse, b = sums(a, t, np.array([S]), np.array([J]), slot, [m], np.array([d]))
+        return sse[m][0], S, J, b[m][0], m, slot, d
+
+    def search(a, t, lines):  # the grid, the denominator's re-fit, refinement
+        found = score(a, t, fs, fd, maps)
+        for k in range(DENOMINATOR_PASSES if refit_linear else 0):
+            sse0, S0, J0, _, mapped, slot0, _ = found[0]
+            if not mapped:  # its start, the map's slots, keeps the nominal's A
+                break
+            u = mapped_input(valves(np.array([S0]), np.array([J0]), slot0))[0]
+            a_new = _refit_denominator(u, t, a, lags, level=True)
+            if a_new is None:
+                break
+            f0 = (S0 + J0) / 2
+            steps = LOCAL_STEPS * (4 if k == 0 else 1)  # the first: A moved f_s
+            near = np.abs(np.log(fs / f0)) <= (steps + 0.5) * np.log(2.0) / 64
+            again = score(a_new, t, fs[near], fd[near], [True])
+            if not again[0][0] < sse0:
+                break
+            a, found = a_new, again
+        # each variant's best point (with the best point's map) refined: both
+        # variants' needles are narrower than the grid's steps in f_d
+        first = [
+            next(f for f in found if f[5] == s and f[4] == found[0][4])
+            for s in VARIANTS
+        ]
+        return a, [refine(a, t, f, lines) for f in first], found[1]
+
+    a, refined, second = search(a_nom, y, ("S", "J", "start"))
+    points = [(f, a) for f in refined]
+    integrating = a_nom.shape[0] > 1 and bool(
+        np.any(np.abs(np.roots(a_nom) - 1.0) < INTEGRATOR_TOLERANCE)
+    )
+    if integrating:  # the differenced record's basin beside the record's
+        a_d, refined_d, _ = search(
+            np.polydiv(a_nom, [1.0, -1.0])[0], np.r_[y[0], np.diff(y)], ("S", "J")
+        )
+        a_d = np.convolve(a_d, [1.0, -1.0])
+        points += [
+            (
+                refine(
+                    a_d, y, rescored(a_d, y, f), ("start", "S", "J"), INTEGRATING_SPANS
+                ),
+                a_d,
+            )
+            for f in refined_d
+        ]
+    # the two best refined points, then the grid's second best as it is (a
+    # refined pair may meet at one point)
+    points = sorted(points, key=lambda p: p[0][0])[:2] + [(second, a)]
     return tuple(
         (
             float(S),
             float(J),
-            _refit_start(b, b_nom, a, lags, mapped, refit_linear),
+            {
+                **_refit_start(b, b_nom, a, lags, mapped, refit_linear),
+                "valve_start": float(d),
+            },
             slot,
         )
-        for _, S, J, b, mapped, slot in found[:PROFILE_STARTS]
+        for (_, S, J, b, mapped, slot, d), a in points
     )
 
 

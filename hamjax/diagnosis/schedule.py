@@ -56,7 +56,15 @@ from .attribute import (
     whitening_noise,
 )
 from .augmented import Row, uses_feedback, uses_memory, uses_table
-from .fit import LAMBDA0, SUCCESSFUL, RowFit, fit_padded, theta_std
+from .fit import (
+    LAMBDA0,
+    SUCCESSFUL,
+    RowFit,
+    fit_padded,
+    frees_valve_start,
+    theta_std,
+    validation_start,
+)
 from .layout import (
     Prepared,
     best_row_per_class,
@@ -295,6 +303,20 @@ def merge(fits: dict, item: Item, new: dict) -> None:
             fits[name][k] = new[name]
 
 
+def validation_starts(prep: Prepared, fits: dict, rows=None) -> None:
+    """The validation output of each row that fits the valve's start
+    (`fit.frees_valve_start`), among `rows` (None: all), simulated from the
+    validation record's own start (`fit.validation_start`), in place: once the
+    case's rows are finished (screening judges them started at $v_0$), and once
+    their prediction-error fits are."""
+    ks = range(len(prep.rows)) if rows is None else rows
+    ks = [k for k in ks if frees_valve_start(prep.rows[k][1])]
+    if ks:
+        fits["y_val"][ks] = validation_start(
+            fits["params"][ks], [prep.rows[k][1] for k in ks], prep.arrays
+        )
+
+
 def parameter_std(prep: Prepared, fits: dict) -> np.ndarray:
     """Gauss-Newton standard errors of every row's `theta` (`[row, P]`)."""
     n_slots = prep.arrays.anchor.shape[0]
@@ -425,6 +447,7 @@ def run_queue(
             queue(extra)
             outstanding[c] = len(extra)
         elif item.stage in ("finish", "more") and outstanding[c] == 0:
+            validation_starts(preps[c], fits[c])
             fits[c]["theta_std"] = parameter_std(preps[c], fits[c])
             if preps[c].fitted:  # the reference, once (`attribute` reads it too)
                 fits[c]["reference"] = refit_over_nominal(preps[c], fits[c])
@@ -440,6 +463,7 @@ def run_queue(
         if outstanding[c] == 0:
             if "whitened" in fits[c]:
                 w = fits[c]["whitened"]
+                validation_starts(preps[c], w, w["rows"])
                 w["theta_std"] = parameter_std(preps[c], w)
             on_case(c, fits[c])
 

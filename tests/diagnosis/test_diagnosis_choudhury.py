@@ -18,7 +18,7 @@ from hamjax.diagnosis.augmented import (
 )
 from hamjax.diagnosis.effects.backlash import slide_init, slide_step, stick_slip_step
 from hamjax.diagnosis.effects.rate_limit import rate_limit_step
-from hamjax.diagnosis.layout import N_MAX, prepare
+from hamjax.diagnosis.layout import N_MAX, PROFILE_POINTS, prepare
 from hamjax.models import DiscreteTransferFunction, Hammerstein, Identity
 from hamjax.papers.gap import control_loops as cl
 
@@ -91,8 +91,9 @@ def _slide_row(row, case):
 
 
 def test_neutral_slide_leaves_every_row_bit_for_bit():
-    # every memory row of the catalogue that leaves the slide slot neutral (a
-    # profile start may free it: those are the slide's own rows, below): the
+    # every memory row of the catalogue that leaves the slide slot and the
+    # valve's start neutral (the profile's starts free them: the slide's own
+    # rows, below; the start: test_diagnosis_valve_start.py): the
     # memory scan is the rate limit and the He / plain step run on their own,
     # bit for bit
     v = np.cumsum(np.random.default_rng([19, 2]).normal(0, 0.3, 300))
@@ -103,8 +104,13 @@ def test_neutral_slide_leaves_every_row_bit_for_bit():
     params, memory = jax.jit(full_parameters), jax.jit(input_memory)
     rate_and_play = jax.jit(_rate_and_play)
     slide_slot = slot_index("slide_jump", N_MAX)
-    rows = [(name, row) for name, row in prep.rows if not row.free[slide_slot]]
-    assert len(rows) >= len(prep.rows) - 2  # at most the profile's two starts
+    start_slot = slot_index("valve_start", N_MAX)  # the profile's starts free it
+    rows = [
+        (name, row)
+        for name, row in prep.rows
+        if not (row.free[slide_slot] or row.free[start_slot])
+    ]
+    assert len(rows) >= len(prep.rows) - PROFILE_POINTS  # the profile's starts
     for name, row in rows:
         p = params(row.theta0 + 0.3, row, case)
         at = named(p, case)

@@ -102,10 +102,13 @@ def test_difference_noise_estimate_ignores_kinks_and_smooth_gaps():
 @pytest.mark.slow
 def test_a_sticky_valve_under_a_drifting_load_keeps_its_name(tmp_path, capsys):
     # Loop 61 of the loops benchmark, seed 0 (a valve with stiction, a drifting
-    # load): the backlash row closes under half of the simulation gap, because
-    # no simulation follows the load, yet with the load's noise model on top it
-    # beats the nominal with it (the like-for-like test, z ~ 19 against 3.5).
-    # What it leaves is that noise, so it is named, not `unexplained`.
+    # load). Started at v0 the backlash row closed under half of the simulation
+    # gap (no simulation follows the load) and was named by the like-for-like
+    # test with the load's noise model on top (z ~ 19 against 3.5), what it left
+    # being that noise. With the valve's start fitted (`valve_start`: the record
+    # finds the valve stuck off its command) it closes 0.8 of it and the gap is
+    # established by simulation itself; either way the name is `backlash`, and
+    # where the veto route names it, what it leaves is the noise's.
     index = 61
     case = cl.make_case(0, index, cl.slots_for(0, index + 1)[index])
     assert case["truth"]["effect"] == "backlash"
@@ -115,8 +118,11 @@ def test_a_sticky_valve_under_a_drifting_load_keeps_its_name(tmp_path, capsys):
     assert code == 0, capsys.readouterr().err
     (found,) = (tmp_path / "out").rglob("diagnosis.json")
     r = json.loads(found.read_text())
-    veto = r["tests"]["deterministic_over_noise"]
-    assert veto["significant"] and r["shrink"] < SHRINK_EXPLAINED, r["tests"]
+    veto = r["tests"].get("deterministic_over_noise")
+    if veto is None:
+        assert r["tests"]["deterministic_gap"]["significant"], r["tests"]
+    else:
+        assert veto["significant"] and r["shrink"] < SHRINK_EXPLAINED, r["tests"]
     assert r["effect"] == "backlash", r["effect"]
 
 

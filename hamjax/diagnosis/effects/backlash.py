@@ -32,6 +32,16 @@ slip the valve keeps sliding at $x - \\mathrm{sign}(\\dot x)(S - J_c)/2$ while i
 input keeps its direction, sticks when the input stops or reverses, and slips
 again once the input has moved from there by more than $S$ against, or $J_c$
 along, its last direction (`slide_step`).
+
+**Where the valve starts.** The contract starts the play at rest at $v_0$
+(centred). A record cut from a loop's operation starts wherever the valve was
+stuck: anywhere within its band of the command, a level that an integrating
+process turns into a ramp until the first slip. Slot `valve_start` ($\\delta$,
+neutral 0) starts the play, the slip and the slide stuck at $v_0 + \\delta$; the
+stick-slip profile's starts free it (`layout.stick_slip_profile`, closed-loop
+records only), and the validation record's own start is found by
+`fit.validation_start` (an initial state estimated on each record, as
+prediction-error validation does: Ljung 1999, §14.3 and §16.6).
 """
 
 import jax.numpy as jnp
@@ -131,15 +141,17 @@ class BacklashEffect(AbstractEffect):
     """Play of width $c \\ge 0$ (neutral $c = 0$) with a slip jump $J \\ge 0$ (He
     et al.) or a slide jump $J_c \\ge 0$ (Choudhury et al.), neutral $0$ each: the
     plain play operator; or a play of width $c_o \\ge 0$ on the output of $G$
-    (`out_backlash`, neutral 0)."""
+    (`out_backlash`, neutral 0); the play starts stuck at $v_0 + \\delta$
+    (`valve_start`, neutral 0)."""
 
     name = "backlash"
-    slots = ("backlash", "slip_jump", "slide_jump", "out_backlash")
+    slots = ("backlash", "slip_jump", "slide_jump", "out_backlash", "valve_start")
     neutral = {
         "backlash": 0.0,
         "slip_jump": 0.0,
         "slide_jump": 0.0,
         "out_backlash": 0.0,
+        "valve_start": 0.0,
     }
     positive = ("backlash", "slip_jump", "slide_jump", "out_backlash")
     extension = ("slip_jump", "slide_jump")
@@ -155,6 +167,7 @@ class BacklashEffect(AbstractEffect):
             "slip_jump": unit,
             "slide_jump": unit,
             "out_backlash": 0.05 * output_span(ctx),
+            "valve_start": unit,
         }
 
     def placement(self, free: set[str]) -> str:

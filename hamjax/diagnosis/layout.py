@@ -124,9 +124,10 @@ LOCAL_STEPS = 16
 DENOMINATOR_EVALUATIONS = 100  # residual evaluations of one variable-projection fit
 # The profile's best points refined by coordinate search (`stick_slip_profile`):
 # S, then J, each over `PROFILE_CHUNK` geometric steps within these factors either
-# side, then the valve's start (`valve_start`) within S times (factor - 1) / (2**0.5
-# - 1) of it, a pass per factor (the first covers the grid's spacing in f_d, and
-# starts within S of v_0)
+# side, then the valve's start (`valve_start`) within START_REACH S (factor - 1) /
+# (2**0.5 - 1) of it, a pass per factor (the first covers the grid's spacing in
+# f_d, and starts up to past the band either side of v_0, where the valve slips at
+# once)
 REFINE_SPANS = (2.0**0.5, 2.0**0.125, 2.0 ** (1 / 32))
 START_REACH = 1.1  # the start's first line reaches this many S either side
 # beside an integrating nominal, the refinement on the record itself (after the
@@ -356,8 +357,9 @@ def stick_slip_profile(
     the backlash rows from the grid `STATIC_BAND_GRID` x `KINETIC_RATIOS` over
     both stick-slip variants (`VARIANTS`: the jump's slot; $S = f_s + f_d$, $J =
     f_s - f_d$ for both: the same reversal band $S$ and sliding offset $f_d = (S
-    - J)/2$): the two best of each variant's best point refined (below), best
-    first, then the grid's second best point as it is.
+    - J)/2$): the best two of the refined points (each variant's best grid
+    point, refined as below; beside an integrating nominal a second basin's
+    too), best first, then the grid's second best point as it is.
 
     Each grid point is scored by separable least squares (Jelali 2008, valve
     stiction by a global search over the stiction parameters with the linear
@@ -504,8 +506,8 @@ def stick_slip_profile(
         e, S, J, b, m, slot, d = point
         for span in spans:
             g = np.exp(np.linspace(-np.log(span), np.log(span), PROFILE_CHUNK))
-            # the start's line: within S of it on the first pass, then narrower
-            # as the others
+            # the start's line: within START_REACH S of it on the first pass,
+            # then narrower as the others
             h = np.linspace(-1.0, 1.0, PROFILE_CHUNK) * (span - 1.0)
             h = START_REACH * h / (REFINE_SPANS[0] - 1.0)
             for line in lines:
@@ -568,9 +570,10 @@ def stick_slip_profile(
             )
             for f in refined_d
         ]
-    # the two best refined points, then the grid's second best as it is (a
-    # refined pair may meet at one point)
-    points = sorted(points, key=lambda p: p[0][0])[:2] + [(second, a)]
+    # the best refined points, then the grid's second best as it is (a refined
+    # pair may meet at one point)
+    points = sorted(points, key=lambda p: p[0][0])[: PROFILE_POINTS - 1]
+    points.append((second, a))
     return tuple(
         (
             float(S),

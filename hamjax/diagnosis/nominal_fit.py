@@ -123,7 +123,8 @@ def _arx(
     b, a, _ = _arx_lstsq(v, y, n, direct=direct, delay=delay)
     # keep the start stable: reflect unstable roots inside the unit circle
     roots = np.roots(a)
-    roots = np.where(np.abs(roots) >= 0.999, 0.98 / np.conj(roots), roots)
+    big = np.abs(roots) >= 0.999  # (a root at 0 is not divided by)
+    roots[big] = 0.98 / np.conj(roots[big])
     return b, np.real(np.poly(roots))
 
 

@@ -28,7 +28,7 @@ What it can replay: the fits depend only on the fitting code, so a change to
 `attribute` or `decide` is measured on the fits captured before it. A change
 to the fits, to the candidate rows, or to what the schedule decides while
 fitting (which rows are re-fitted by prediction error follows
-`attribute.whitening_predictor`; the noise candidates are stored with the
+`attribute.whitening_noise`; the noise candidates are stored with the
 fits) needs a new capture. The pickles hold hamjax's internal objects: replay
 them with a tree whose `Prepared`, `Row` and `Candidate` are those that
 captured them (noise candidates captured before `Candidate.predictor`, 2026-12-07,

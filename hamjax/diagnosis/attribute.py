@@ -939,23 +939,14 @@ def nominal_noise(
 def whitening_noise(noise: dict[str, Candidate], r_ref: np.ndarray) -> Candidate | None:
     """The case's significant noise model (`noise`: `noise_candidates`), whose
     `whitening` is the filter $A(q)$ (`noise_fit.noise_filter`) through which
-    `schedule` re-fits the deterministic candidates by prediction error; None
-    when the reference's validation residual `r_ref` (`reference`) has no
-    significant noise model."""
+    `schedule` re-fits the deterministic candidates by prediction error: its
+    predictor (`attribute` judges the candidates through the predictor itself,
+    `one_step_errors`), or for the flicker model, which has no finite filter,
+    its low-order stand-in (`noise_candidates` sets `whitening` on every noise
+    model); None when the reference's validation residual `r_ref`
+    (`reference`) has no significant noise model."""
     c, ok, _ = nominal_noise(noise, r_ref)
     return c if ok else None
-
-
-def whitening_predictor(
-    noise: dict[str, Candidate], r_ref: np.ndarray
-) -> tuple[str, float] | None:
-    """`(name, value)` of `whitening_noise`'s filter: its predictor (`attribute`
-    judges the candidates through the predictor itself, `one_step_errors`), or
-    for the flicker model, which has no finite filter, its low-order stand-in
-    (`noise_candidates` sets `whitening` on every noise model); None without a
-    significant noise model."""
-    c = whitening_noise(noise, r_ref)
-    return None if c is None else c.whitening
 
 
 def attribute(prep: Prepared, fit: dict) -> Attribution:

@@ -504,6 +504,7 @@ def stick_slip_profile(
 
     def refine(a, t, point, lines, spans=REFINE_SPANS):  # on finer lines
         e, S, J, b, m, slot, d = point
+        one = np.ones(PROFILE_CHUNK)
         for span in spans:
             g = np.exp(np.linspace(-np.log(span), np.log(span), PROFILE_CHUNK))
             # the start's line: within START_REACH S of it on the first pass,
@@ -511,7 +512,6 @@ def stick_slip_profile(
             h = np.linspace(-1.0, 1.0, PROFILE_CHUNK) * (span - 1.0)
             h = START_REACH * h / (REFINE_SPANS[0] - 1.0)
             for line in lines:
-                one = np.ones(PROFILE_CHUNK)
                 SS = S * g if line == "S" else S * one
                 JJ = np.minimum(J * g if line == "J" else J * one, SS)  # f_d >= 0
                 dd = d + S * h if line == "start" else d * one

@@ -149,9 +149,9 @@ def test_the_fractional_predictor_recovers_the_innovations(getkey, d):
 
 def test_the_prediction_error_refits_whiten_by_the_flicker_models_stand_in(getkey):
     # where the flicker model is the case's noise model, `schedule`'s re-fits need
-    # a finite filter: `whitening_predictor` hands them the low-order stand-in,
+    # a finite filter: `whitening_noise`'s filter is the low-order stand-in,
     # while the judgement through the noise model keeps the fractional predictor
-    from hamjax.diagnosis.attribute import Candidate, whitening_predictor
+    from hamjax.diagnosis.attribute import Candidate, whitening_noise
 
     est, val = split(flicker(getkey(), 1.0))
     fit = noise_fit_numpy(est, val)
@@ -169,4 +169,4 @@ def test_the_prediction_error_refits_whiten_by_the_flicker_models_stand_in(getke
         for effect, p in fit.items()
     }
     assert cands["coloured_noise"].params.keys() == {"fractional_d"}
-    assert whitening_predictor(cands, val) == fit["coloured_noise"].whitening
+    assert whitening_noise(cands, val).whitening == fit["coloured_noise"].whitening

@@ -12,7 +12,7 @@ import pytest
 import scipy.signal
 
 import hamjax.diagnosis.schedule as schedule
-from hamjax.diagnosis.attribute import reference, whitening_predictor
+from hamjax.diagnosis.attribute import reference, whitening_noise
 from hamjax.diagnosis.augmented import simulate_with_filter
 from hamjax.diagnosis.fit import (
     _coefficients,
@@ -129,7 +129,7 @@ def test_the_queue_refits_by_prediction_error_only_where_noise_is_coloured():
     items = whitening_items(0, coloured, {k: fits[k] for k in fits if k != "whitened"})
     assert items
     fir, ar, weight, dfir, dar, shift = items[0].noise
-    predictor = whitening_predictor(fits["noise"], reference(coloured, fits)[2])
+    predictor = whitening_noise(fits["noise"], reference(coloured, fits)[2]).whitening
     np.testing.assert_array_equal(fir, noise_filter(*predictor)[0])
     assert ar == 0.0 and -1 < fir[1] < -0.5  # the AR(1) predictor 1 - a q^-1
     assert weight > 0

@@ -11,6 +11,7 @@ from jax import lax
 from jaxtyping import Array, Float
 
 from .._filters import lfilter_numpy, state_space_numpy, zoh_tf
+from ..io.model_json import integrators
 from ..models import (
     Backlash,
     ContinuousTransferFunction,
@@ -526,19 +527,23 @@ def stick_slip_profile(
         sse, b = sums(a, t, np.array([S]), np.array([J]), slot, [m], np.array([d]))
         return sse[m][0], S, J, b[m][0], m, slot, d
 
-    def search(a, t, lines):  # the grid, the denominator's re-fit, refinement
+    def search(a, t, lines, order):  # the grid, the denominator's re-fit, refinement
         found = score(a, t, fs, fd, maps)
         for k in range(DENOMINATOR_PASSES if refit_linear else 0):
             sse0, S0, J0, _, mapped, slot0, _ = found[0]
             if not mapped:  # its start, the map's slots, keeps the nominal's A
                 break
             u = mapped_input(valves(np.array([S0]), np.array([J0]), slot0))[0]
-            a_new = _refit_denominator(u, t, a, lags, level=True)
-            if a_new is None:
-                break
             f0 = (S0 + J0) / 2
             steps = LOCAL_STEPS * (4 if k == 0 else 1)  # the first: A moved f_s
             near = np.abs(np.log(fs / f0)) <= (steps + 0.5) * np.log(2.0) / 64
+            # at the order the row re-fits (`refit_linear_order`): the
+            # nominal's A with zeros beyond its own order to start from
+            a_new = _refit_denominator(
+                u, t, np.pad(a, (0, max(order + 1 - a.shape[0], 0))), lags, level=True
+            )
+            if a_new is None:
+                break
             again = score(a_new, t, fs[near], fd[near], [True])
             if not again[0][0] < sse0:
                 break
@@ -551,14 +556,20 @@ def stick_slip_profile(
         ]
         return a, [refine(a, t, f, lines) for f in first], found[1]
 
-    a, refined, second = search(a_nom, y, ("S", "J", "start"))
+    a, refined, second = search(a_nom, y, ("S", "J", "start"), last)
     points = [(f, a) for f in refined]
-    integrating = a_nom.shape[0] > 1 and bool(
-        np.any(np.abs(np.roots(a_nom) - 1.0) < INTEGRATOR_TOLERANCE)
+    integrating = (
+        integrators(
+            DiscreteTransferFunction(b_nom, a_nom, dt), tolerance=INTEGRATOR_TOLERANCE
+        )
+        > 0
     )
     if integrating:  # the differenced record's basin beside the record's
         a_d, refined_d, _ = search(
-            np.polydiv(a_nom, [1.0, -1.0])[0], np.r_[y[0], np.diff(y)], ("S", "J")
+            np.polydiv(a_nom, [1.0, -1.0])[0],
+            np.r_[y[0], np.diff(y)],
+            ("S", "J"),
+            last - 1,  # the integrator is the row's last order
         )
         a_d = np.convolve(a_d, [1.0, -1.0])
         points += [

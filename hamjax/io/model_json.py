@@ -154,19 +154,27 @@ def load_model(source: str | os.PathLike | dict) -> tuple[Hammerstein, float | N
 MAX_INTEGRATORS = 2  # a position axis driven by a force is a double integrator
 
 
-def _integrator_poles(linear) -> tuple[np.ndarray, np.ndarray]:
+INTEGRATOR_ROUNDING = 1e-9  # a pole this close to z = 1 (or s = 0) is one, to rounding
+
+
+def _integrator_poles(
+    linear, tolerance: float = INTEGRATOR_ROUNDING
+) -> tuple[np.ndarray, np.ndarray]:
     """`(at, inside)` over the poles of `linear`: at an integrator (z = 1 for a
-    discrete block, s = 0 for a continuous one, to rounding), strictly stable."""
+    discrete block, s = 0 for a continuous one, within `tolerance`: relative to
+    the largest pole's modulus for a continuous one), strictly stable."""
     poles = np.asarray(linear.poles(), complex)
     if isinstance(linear, ContinuousTransferFunction):
         scale = max(float(np.max(np.abs(poles))) if poles.size else 1.0, 1.0)
-        return np.abs(poles) <= 1e-9 * scale, poles.real < 0
-    return np.abs(poles - 1.0) <= 1e-9, np.abs(poles) < 1.0
+        return np.abs(poles) <= tolerance * scale, poles.real < 0
+    return np.abs(poles - 1.0) <= tolerance, np.abs(poles) < 1.0
 
 
-def integrators(linear) -> int:
-    """How many poles of `linear` are integrators (`_integrator_poles`)."""
-    return int(np.sum(_integrator_poles(linear)[0]))
+def integrators(linear, *, tolerance: float = INTEGRATOR_ROUNDING) -> int:
+    """How many poles of `linear` are integrators (`_integrator_poles`): to
+    rounding by default; a fit's pole near 1 is judged at a looser `tolerance`
+    (`diagnosis.layout.INTEGRATOR_TOLERANCE`)."""
+    return int(np.sum(_integrator_poles(linear, tolerance)[0]))
 
 
 def integrating_only(linear) -> bool:

@@ -57,6 +57,35 @@ def _sticky_loop(
     return plant, dt, loop["op"], loop["pv"]
 
 
+def _impulse_error(start: dict, b_nom, b, a) -> float:
+    """The largest difference of the impulse responses (300 samples) of a
+    `REFIT_LINEAR` start's linear block (the nominal numerator `b_nom` plus the
+    start's changes `db..`, over its `den..`) and of the true `b / a`, over
+    the truth's peak."""
+    full = np.zeros(N_MAX + 1)
+    full[: len(b_nom)] = b_nom
+    for k in range(N_MAX + 1):
+        full[k] += start.get(f"db{k}", 0.0)
+    den = np.r_[1.0, [start.get(f"den{j}", 0.0) for j in range(1, N_MAX + 1)]]
+    pulse = np.r_[1.0, np.zeros(299)]
+    true = lfilter(b, a, pulse)
+    return float(np.max(np.abs(lfilter(full, den, pulse) - true)) / np.abs(true).max())
+
+
+def _fitted_profile(nominal, dt, op, pv):
+    """`stick_slip_profile` of the loop `op -> pv` beside `nominal` as beside a
+    fitted discrete nominal (`refit_linear`)."""
+    return stick_slip_profile(
+        describe_nominal(nominal),
+        nominal.linear,
+        dt,
+        op,
+        pv,
+        bucket(op.shape[0]),
+        refit_linear=True,
+    )
+
+
 def test_the_profile_finds_the_static_band_of_a_closed_loop():
     for i, fs_rel, ratio in [(0, 0.08, 0.1), (1, 0.15, 0.05), (4, 0.05, 0.1)]:
         plant, dt, op, pv = _sticky_loop(i, 1.0, 1.0)  # a first run for the range
@@ -275,8 +304,9 @@ def test_the_profile_is_blind_to_the_nominal_numerator():
     # fitted nominal absorbs the valve so): the profile fits the numerator at
     # every grid point, so it still finds f_s (as in the first test, two grid
     # steps); beside a fitted discrete nominal (`refit_linear`) its start re-fits
-    # the linear block from the fitted numerator, which is the true one to 5 % of
-    # its largest coefficient (noise-free: what is left comes from the grid
+    # the linear block from the fitted numerator and denominator (at the order
+    # the row re-fits, `refit_linear_order`), whose impulse response is the true
+    # one to 5 % of its peak (noise-free: what is left comes from the grid
     # point's valve, which slips a sample or so off the truth's), elsewhere the
     # gain alone
     plant, dt, op, pv = _sticky_loop(0, 1.0, 1.0)
@@ -297,13 +327,7 @@ def test_the_profile_is_blind_to_the_nominal_numerator():
             assert set(start) == {"gain", "valve_start"}
             continue
         assert start[REFIT_LINEAR] == 1.0
-        full = np.zeros(N_MAX + 1)
-        full[: wrong.shape[0]] = wrong
-        for k in range(N_MAX + 1):
-            full[k] += start.get(f"db{k}", 0.0)
-        true = np.zeros(N_MAX + 1)
-        true[: b.shape[0]] = b
-        np.testing.assert_allclose(full, true, atol=0.05 * np.abs(b).max())
+        assert _impulse_error(start, wrong, b, a) < 0.05, start
 
 
 def test_a_piecewise_linear_nominal_is_also_profiled_without_its_map():
@@ -345,9 +369,11 @@ def test_the_denominator_refit_recovers_an_output_error_model():
 def test_beside_a_fitted_nominal_the_profile_refits_the_denominator():
     # a fitted nominal's poles wrong too (moved by 10 %, as a valve's limit cycle
     # moves a fitted nominal's), numerator and all: `refit_linear` re-fits the
-    # denominator at the best point and scores the grid near it again, so the
-    # start carries the true denominator (to 5 % of its largest coefficient, as
-    # the numerator above) and f_s stays within two grid steps
+    # denominator at the best point, at the order the row re-fits (third: the
+    # nominal's first-order A with zeros to start from), and scores the grid near
+    # it again, so the start's linear block responds as the true one (its
+    # impulse response to 5 % of the peak, as above) and f_s stays within two
+    # grid steps
     plant, dt, op, pv = _sticky_loop(0, 1.0, 1.0)
     fs = 0.08 * np.ptp(op)
     plant, dt, op, pv = _sticky_loop(0, fs, 0.1 * fs)
@@ -356,20 +382,12 @@ def test_beside_a_fitted_nominal_the_profile_refits_the_denominator():
     nominal = hj.Hammerstein(
         hj.Identity(), hj.DiscreteTransferFunction(0.6 * b, a_wrong, dt)
     )
-    found = stick_slip_profile(
-        describe_nominal(nominal),
-        nominal.linear,
-        dt,
-        op,
-        pv,
-        bucket(op.shape[0]),
-        refit_linear=True,
-    )
+    found = _fitted_profile(nominal, dt, op, pv)
     S, J, start, _ = found[0]
     step_s = STATIC_BAND_GRID[0] / STATIC_BAND_GRID[1]
     assert abs(np.log(((S + J) / 2) / fs)) <= 2.0 * np.log(step_s), found
-    den = np.array([1.0] + [start.get(f"den{j}", 0.0) for j in range(1, a.shape[0])])
-    np.testing.assert_allclose(den, a, atol=0.05 * np.abs(a).max())
+    assert any(start.get(f"den{j}", 0.0) != 0.0 for j in (2, 3)), start
+    assert _impulse_error(start, 0.6 * b, b, a) < 0.05, start
 
 
 def test_the_profile_starts_are_not_continued_as_far_from_their_optimum():
@@ -407,3 +425,47 @@ def test_the_output_level_of_a_profile_start_is_reported_with_the_refit():
     out = _params(prep, fit, k, "backlash")
     assert out["nominal_refit"]["out_off"]["value"] == 0.7
     assert "den1" in out["nominal_refit"] and "out_off" not in out
+
+
+def _sopdt_loop(i: int, fs: float, fd: float, n: int = 2000):
+    """`_sticky_loop`'s loop around a second-order process (time constants 40
+    and 15, one sample of dead time): `(b, a, dt, op, pv)`, noise-free."""
+    rng = np.random.default_rng([19, i])
+    dt, p, delay = 2.0, {"K": 1.5, "t1": 40.0, "t2": 15.0}, 1
+    b, a = cl.discrete_process(*cl.process_tf("sopdt", p), dt, delay)
+    pi = cl.simc_pi("sopdt", p, delay, dt, detune=1.0)
+    sp = np.repeat(rng.uniform(-3.0, 3.0, n // 250 + 1), 250)[:n]
+    sp[:50] = 0.0
+    zero = np.zeros(n)
+    loop = cl.simulate_loop(
+        b, a, pi, dt, sp, zero, zero, valve=cl.HeStiction(fs, fd, x0=0.0)
+    )
+    return b, a, dt, loop["op"], loop["pv"]
+
+
+def test_the_denominator_is_refitted_at_the_order_the_row_refits():
+    # a fitted nominal of first order (as a sticky record's selection may give)
+    # in front of a second-order process: the profile's denominator re-fit
+    # starts from the nominal's A with zeros up to the order the row re-fits
+    # (`refit_linear_order`, third), so the start's linear block responds as
+    # the true process (impulse response within a tenth of its peak; at the
+    # nominal's own order the start's is off by four times the peak, measured)
+    # and S and J are found within 1 % (noise-free). Not every loop: with
+    # f_s 8 % of the command's range and f_d / f_s 0.3 the re-fit at the best
+    # grid point settles with S 10 % low (measured; a limit left)
+    for i, fs_rel, ratio in [(1, 0.12, 0.5), (3, 0.1, 0.1)]:
+        b, a, dt, op, pv = _sopdt_loop(i, 1.0, 1.0)  # a first run for the range
+        fs = fs_rel * np.ptp(op)
+        b, a, dt, op, pv = _sopdt_loop(i, fs, ratio * fs)
+        pole = np.exp(-dt / 55.0)  # one time constant for the two
+        b_nom = np.array([0.0, 0.0, 1.5 * (1.0 - pole)])
+        nominal = hj.Hammerstein(
+            hj.Identity(), hj.DiscreteTransferFunction(b_nom, [1.0, -pole], dt)
+        )
+        found = _fitted_profile(nominal, dt, op, pv)
+        S, J, start, slot = found[0]
+        assert slot == "slip_jump", found
+        S0, J0 = fs * (1 + ratio), fs * (1 - ratio)
+        assert abs(np.log(S / S0)) < 0.01 and abs(np.log(J / J0)) < 0.01, found[0]
+        assert start.get("den3", 0.0) != 0.0  # the third order reached
+        assert _impulse_error(start, b_nom, b, a) < 0.1, start

@@ -21,7 +21,8 @@ at 0, as the benchmark ran it, or at the first command with no force, the
 contract's convention and the fits' (`--start`, both by default). Written:
 `loop_recall_bound.json` (per seed and pooled: sticky loops, detectable ones,
 how many of those the diagnosis named stiction-like, the same for a valve
-visibility below 1). No timing; about 2.5 minutes a seed on 2 cores.
+visibility below 1; per seed the detectable loops missed and the loops named
+though not detectable, by case). No timing; about 2.5 minutes a seed on 2 cores.
 """
 
 import argparse
@@ -98,8 +99,11 @@ def main(argv=None) -> None:
     result: dict = {"cases_per_seed": args.cases, "seeds": {}}
     pooled = {s: np.zeros(6, int) for s in args.start}
     for seed in args.seeds:
-        every = diagnose_captured(list(loop_cases(seed, args.cases).values()))
-        loops = [x for x in every if x[0]["effect"] == "backlash"]
+        cases = loop_cases(seed, args.cases)
+        every = zip(cases, diagnose_captured(list(cases.values())), strict=True)
+        ids, loops = zip(
+            *((i, x) for i, x in every if x[0]["effect"] == "backlash"), strict=True
+        )
         result["seeds"][str(seed)] = {}
         for start in args.start:
             det = [_detectable(t, prep, fit, start) for t, prep, fit, _ in loops]
@@ -116,7 +120,15 @@ def main(argv=None) -> None:
                 ]
             )
             pooled[start] += counts
-            result["seeds"][str(seed)][start] = _entry(counts)
+            result["seeds"][str(seed)][start] = _entry(counts) | {
+                # the loops that bound recall and are missed, and the reverse
+                "detectable_missed": [
+                    i for i, d, m in zip(ids, det, named, strict=True) if d and not m
+                ],
+                "named_not_detectable": [
+                    i for i, d, m in zip(ids, det, named, strict=True) if m and not d
+                ],
+            }
             print(f"seed {seed}, valve from {start}: {_line(counts)}")
     result["pooled"] = {s: _entry(c) for s, c in pooled.items()}
     for start, counts in pooled.items():

@@ -380,7 +380,10 @@ def stick_slip_profile(
     (poles fitted to a valve's limit cycle: a mode near $-1$, a near-integrator),
     so where the best point keeps the nominal's map (its start can re-fit the
     linear block) the denominator is re-fitted too, by variable projection there
-    (`_refit_denominator`: the output error over $A$, $b$ by least squares), and
+    (`_refit_denominator`: the output error over $A$, $b$ by least squares), at
+    the order the row re-fits (`refit_linear_order`; from the nominal's $A$
+    padded with zeros: a sticky record's own nominal is often of lower order
+    than the process, the selection having seen the valve's limit cycle), and
     the grid scored again with it near that point's $f_s$, within four times
     `LOCAL_STEPS` (a factor of 2 either way: a wrong $A$ moved the best $f_s$ by
     a quarter in the tests), then within `LOCAL_STEPS`; up to

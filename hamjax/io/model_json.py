@@ -161,8 +161,9 @@ def _integrator_poles(
     linear, tolerance: float = INTEGRATOR_ROUNDING
 ) -> tuple[np.ndarray, np.ndarray]:
     """`(at, inside)` over the poles of `linear`: at an integrator (z = 1 for a
-    discrete block, s = 0 for a continuous one, within `tolerance`: relative to
-    the largest pole's modulus for a continuous one), strictly stable."""
+    discrete block, s = 0 for a continuous one, within `tolerance`: for a
+    continuous one times the largest pole's modulus where that exceeds 1),
+    strictly stable."""
     poles = np.asarray(linear.poles(), complex)
     if isinstance(linear, ContinuousTransferFunction):
         scale = max(float(np.max(np.abs(poles))) if poles.size else 1.0, 1.0)

@@ -537,9 +537,6 @@ def stick_slip_profile(
             if not mapped:  # its start, the map's slots, keeps the nominal's A
                 break
             u = mapped_input(valves(np.array([S0]), np.array([J0]), slot0))[0]
-            f0 = (S0 + J0) / 2
-            steps = LOCAL_STEPS * (4 if k == 0 else 1)  # the first: A moved f_s
-            near = np.abs(np.log(fs / f0)) <= (steps + 0.5) * np.log(2.0) / 64
             # at the order the row re-fits (`refit_linear_order`): the
             # nominal's A with zeros beyond its own order to start from
             a_new = _refit_denominator(
@@ -547,6 +544,9 @@ def stick_slip_profile(
             )
             if a_new is None:
                 break
+            f0 = (S0 + J0) / 2
+            steps = LOCAL_STEPS * (4 if k == 0 else 1)  # the first: A moved f_s
+            near = np.abs(np.log(fs / f0)) <= (steps + 0.5) * np.log(2.0) / 64
             again = score(a_new, t, fs[near], fd[near], [True])
             if not again[0][0] < sse0:
                 break

@@ -35,17 +35,29 @@ from hamjax.models.nonlinearities.piecewise_linear import piecewise_linear_map
 from hamjax.papers.gap import control_loops as cl
 
 
+FOPDT = ("fopdt", {"K": 1.5, "tau": 60.0})
+# time constants 40 and 15
+SOPDT = ("sopdt", {"K": 1.5, "t1": 40.0, "t2": 15.0})
+
+
 def _sticky_loop(
-    i: int, fs: float, fd: float, n: int = 2000, valve=None, noise: float = 0.0
+    i: int,
+    fs: float,
+    fd: float,
+    n: int = 2000,
+    valve=None,
+    noise: float = 0.0,
+    process: tuple = FOPDT,
 ):
-    """An FOPDT process under SIMC PI control, setpoint steps every 250 samples,
+    """A process (`process`: its kind and physics, one sample of dead time;
+    FOPDT by default) under SIMC PI control, setpoint steps every 250 samples,
     noise-free unless `noise` (the std of white measurement noise on the PV, which
     the controller reads); the valve by He et al.'s model (or `valve`). Returns
     the plant, op, pv."""
     rng = np.random.default_rng([19, i])
-    dt, p, delay = 2.0, {"K": 1.5, "tau": 60.0}, 1
-    b, a = cl.discrete_process(*cl.process_tf("fopdt", p), dt, delay)
-    pi = cl.simc_pi("fopdt", p, delay, dt, detune=1.0)
+    (kind, p), dt, delay = process, 2.0, 1
+    b, a = cl.discrete_process(*cl.process_tf(kind, p), dt, delay)
+    pi = cl.simc_pi(kind, p, delay, dt, detune=1.0)
     sp = np.repeat(rng.uniform(-3.0, 3.0, n // 250 + 1), 250)[:n]
     sp[:50] = 0.0  # from rest, as the valve model starts
     zero = np.zeros(n)
@@ -427,22 +439,6 @@ def test_the_output_level_of_a_profile_start_is_reported_with_the_refit():
     assert "den1" in out["nominal_refit"] and "out_off" not in out
 
 
-def _sopdt_loop(i: int, fs: float, fd: float, n: int = 2000):
-    """`_sticky_loop`'s loop around a second-order process (time constants 40
-    and 15, one sample of dead time): `(b, a, dt, op, pv)`, noise-free."""
-    rng = np.random.default_rng([19, i])
-    dt, p, delay = 2.0, {"K": 1.5, "t1": 40.0, "t2": 15.0}, 1
-    b, a = cl.discrete_process(*cl.process_tf("sopdt", p), dt, delay)
-    pi = cl.simc_pi("sopdt", p, delay, dt, detune=1.0)
-    sp = np.repeat(rng.uniform(-3.0, 3.0, n // 250 + 1), 250)[:n]
-    sp[:50] = 0.0
-    zero = np.zeros(n)
-    loop = cl.simulate_loop(
-        b, a, pi, dt, sp, zero, zero, valve=cl.HeStiction(fs, fd, x0=0.0)
-    )
-    return b, a, dt, loop["op"], loop["pv"]
-
-
 def test_the_denominator_is_refitted_at_the_order_the_row_refits():
     # a fitted nominal of first order (as a sticky record's selection may give)
     # in front of a second-order process: the profile's denominator re-fit
@@ -454,9 +450,10 @@ def test_the_denominator_is_refitted_at_the_order_the_row_refits():
     # f_s 8 % of the command's range and f_d / f_s 0.3 the re-fit at the best
     # grid point settles with S 10 % low (measured; a limit left)
     for i, fs_rel, ratio in [(1, 0.12, 0.5), (3, 0.1, 0.1)]:
-        b, a, dt, op, pv = _sopdt_loop(i, 1.0, 1.0)  # a first run for the range
+        plant, dt, op, pv = _sticky_loop(i, 1.0, 1.0, process=SOPDT)  # the range
         fs = fs_rel * np.ptp(op)
-        b, a, dt, op, pv = _sopdt_loop(i, fs, ratio * fs)
+        plant, dt, op, pv = _sticky_loop(i, fs, ratio * fs, process=SOPDT)
+        b, a = np.asarray(plant.linear.b), np.asarray(plant.linear.a)
         pole = np.exp(-dt / 55.0)  # one time constant for the two
         b_nom = np.array([0.0, 0.0, 1.5 * (1.0 - pole)])
         nominal = hj.Hammerstein(

@@ -571,7 +571,9 @@ def frees_valve_start(row: Row) -> bool:
     return bool(free[slot_index("valve_start", n_max_of(free.shape[-1]))])
 
 
-def validation_start(params: np.ndarray, rows: list, case: CaseArrays) -> np.ndarray:
+def validation_start(
+    params: np.ndarray, rows: list, case: CaseArrays, *, batch: int = 1
+) -> np.ndarray:
     """The validation outputs `(R, L)` of rows that fit the valve's start
     (`frees_valve_start`) at their fitted `params` `(R, S)`, each with the
     validation record's own start: as the estimation record's, that is an
@@ -579,6 +581,14 @@ def validation_start(params: np.ndarray, rows: list, case: CaseArrays) -> np.nda
     there by the least simulation SSE over `VALIDATION_STARTS` starts within
     the play's width of $v_0$, then as many within a step of the best, and so
     on (`_starts_on_validation`, the rows in one call). One parameter; the
-    other rows start from rest, as the contract's simulations do."""
-    taus = jnp.asarray(np.array([int(r.tau) for r in rows]))
-    return np.asarray(_starts_on_validations(jnp.asarray(params), taus, case))
+    other rows start from rest, as the contract's simulations do.
+
+    The rows are padded (the last repeated) to a multiple of `batch`, so that
+    calls with up to `batch` rows share one compiled program per record length
+    (each row is simulated on its own: the padding changes no row's output)."""
+    R = len(rows)
+    pad = -R % batch
+    taus = np.array([int(r.tau) for r in rows] + [int(rows[-1].tau)] * pad)
+    params = np.concatenate([params, np.repeat(params[-1:], pad, axis=0)])
+    out = _starts_on_validations(jnp.asarray(params), jnp.asarray(taus), case)
+    return np.asarray(out)[:R]

@@ -459,7 +459,7 @@ def stick_slip_profile(
             return np.stack([_static_numpy(nom, xi) for xi in x])
         return _static_numpy(nom, x)  # elementwise: every row at once
 
-    def sums(a, t, S, J, slot, maps, d=None):  # SSE, numerator of each point
+    def sums(a, t, S, J, slot, maps, d=None):  # SSE (a non-finite one inf), numerator
         d = np.zeros(S.shape[0]) if d is None else d  # `t`: the target output
         sse = {m: np.empty(S.shape[0]) for m in maps}
         width = lags.shape[0] + int(refit_linear)
@@ -490,14 +490,14 @@ def stick_slip_profile(
             for m in maps:  # the valve positions once for both maps
                 u = lfilter_numpy(_ONE, a, mapped_input(x) if m else x)
                 sse[m][c], b[m][c] = _free_numerator_sse(u, t, lags, level=refit_linear)
-        return sse, b
+        return {m: np.where(np.isfinite(e), e, np.inf) for m, e in sse.items()}, b
 
     def score(a, t, fs, fd, maps):  # the best points of each variant and map
         found = []
         for slot in VARIANTS:
             sse, b = sums(a, t, fs + fd, fs - fd, slot, maps)
             for m in maps:
-                e = np.where(np.isfinite(sse[m]), sse[m], np.inf)
+                e = sse[m]
                 best = np.argsort(e, kind="stable")[:PROFILE_STARTS]
                 found += [
                     (e[i], fs[i] + fd[i], fs[i] - fd[i], b[m][i], m, slot, 0.0)
@@ -520,7 +520,7 @@ def stick_slip_profile(
                 JJ = np.minimum(J * g if line == "J" else J * one, SS)  # f_d >= 0
                 dd = d + S * h if line == "start" else d * one
                 sse, bb = sums(a, t, SS, JJ, slot, [m], dd)
-                i = int(np.argmin(np.where(np.isfinite(sse[m]), sse[m], np.inf)))
+                i = int(np.argmin(sse[m]))
                 if sse[m][i] < e:
                     e, S, J, d, b = sse[m][i], SS[i], JJ[i], dd[i], bb[m][i]
         return e, S, J, b, m, slot, d

@@ -66,6 +66,7 @@ from .fit import (
     validation_start,
 )
 from .layout import (
+    PROFILE_POINTS,
     Prepared,
     best_row_per_class,
     finite_sse,
@@ -313,7 +314,10 @@ def validation_starts(prep: Prepared, fits: dict, rows=None) -> None:
     ks = [k for k in ks if frees_valve_start(prep.rows[k][1])]
     if ks:
         fits["y_val"][ks] = validation_start(
-            fits["params"][ks], [prep.rows[k][1] for k in ks], prep.arrays
+            fits["params"][ks],
+            [prep.rows[k][1] for k in ks],
+            prep.arrays,
+            batch=PROFILE_POINTS,  # the rows that free the start: one program
         )
 
 

@@ -13,11 +13,13 @@ from hamjax.diagnosis.augmented import (
 )
 from hamjax.diagnosis.fit import (
     VALIDATION_STARTS,
+    _starts_on_validations,
     frees_valve_start,
     validation_start,
 )
 from hamjax.diagnosis.layout import (
     N_MAX,
+    PROFILE_POINTS,
     _valve_positions,
     bucket,
     describe_nominal,
@@ -166,3 +168,23 @@ def test_the_validation_record_gets_its_own_start():
     # the search's second step is (2 S / VALIDATION_STARTS)**2 / S: the level it
     # may leave before the first slip is far below the noise (0.05)
     assert err < 0.1 * off, (err, off, VALIDATION_STARTS)
+
+
+def test_validation_starts_of_one_row_or_several_share_one_program():
+    # padded to a multiple of `batch`, one row's validation output is the same
+    # whether it is simulated alone or beside others, and the calls with 1 and
+    # 3 rows run one compiled program (a cold diagnosis compiled one for each
+    # count of such rows, 2.6 s apiece on a loop's record)
+    plant, dt, est, val = _integrating_loop(0, 1.5, 0.5)
+    prep = prepare(plant, dt, est, val)
+    rows = [r for _, r in prep.rows if frees_valve_start(r)]
+    assert len(rows) == PROFILE_POINTS
+    params = np.stack(
+        [np.array(full_parameters(np.asarray(r.theta0), r, prep.arrays)) for r in rows]
+    )
+    before = _starts_on_validations._cache_size()
+    all_rows = validation_start(params, rows, prep.arrays, batch=PROFILE_POINTS)
+    one = validation_start(params[1:2], rows[1:2], prep.arrays, batch=PROFILE_POINTS)
+    assert all_rows.shape[0] == PROFILE_POINTS and one.shape[0] == 1
+    np.testing.assert_array_equal(one[0], all_rows[1])
+    assert _starts_on_validations._cache_size() - before <= 1

@@ -586,7 +586,11 @@ def validation_start(
     The rows are padded (the last repeated) to a multiple of `batch`, so that
     calls with up to `batch` rows share one compiled program per record length
     (each row is simulated on its own: the padding changes no row's output)."""
+    if batch < 1:
+        raise ValueError(f"batch must be a positive number of rows, not {batch}")
     R = len(rows)
+    if R == 0:
+        return np.zeros((0, case.v_val.shape[0]))
     pad = -R % batch
     taus = np.array([int(r.tau) for r in rows] + [int(rows[-1].tau)] * pad)
     params = np.concatenate([params, np.repeat(params[-1:], pad, axis=0)])

@@ -188,3 +188,7 @@ def test_validation_starts_of_one_row_or_several_share_one_program():
     assert all_rows.shape[0] == PROFILE_POINTS and one.shape[0] == 1
     np.testing.assert_array_equal(one[0], all_rows[1])
     assert _starts_on_validations._cache_size() - before <= 1
+    assert validation_start(params[:0], [], prep.arrays).shape == (
+        0,
+        prep.arrays.v_val.shape[0],
+    )

@@ -101,9 +101,8 @@ def main(argv=None) -> None:
     for seed in args.seeds:
         cases = loop_cases(seed, args.cases)
         every = zip(cases, diagnose_captured(list(cases.values())), strict=True)
-        ids, loops = zip(
-            *((i, x) for i, x in every if x[0]["effect"] == "backlash"), strict=True
-        )
+        sticky = [(i, x) for i, x in every if x[0]["effect"] == "backlash"]
+        ids, loops = [i for i, _ in sticky], [x for _, x in sticky]
         result["seeds"][str(seed)] = {}
         for start in args.start:
             det = [_detectable(t, prep, fit, start) for t, prep, fit, _ in loops]

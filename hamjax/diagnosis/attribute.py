@@ -539,9 +539,12 @@ def _params(prep: Prepared, fit: dict, row: int, effect: str) -> dict:
         out["tau_seconds"] = {"value": tau * prep.ctx.dt, "std": std * prep.ctx.dt}
     refit = {}
     level = set(LEVEL_SLOT_NAMES.get(effect, ())) - used
+    held = np.asarray(prep.rows[row][1].held) != np.asarray(prep.arrays.neutral)
     for i, name in enumerate(names):
         if free[i] and (name not in EFFECT_SLOTS or name in level):
             refit[name] = {"value": float(phys[i]), "std": float(std_full[i])}
+        elif held[i] and not free[i]:  # held off the nominal (`IDENTITY_MAP`)
+            refit[name] = {"value": float(phys[i]), "std": 0.0}
     out["nominal_refit"] = refit
     return out
 

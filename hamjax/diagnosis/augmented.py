@@ -169,12 +169,15 @@ class CaseArrays(eqx.Module):
 
 
 class Row(eqx.Module):
-    """One candidate start: `idx[j]` is the slot moved by `theta[j]` (`S` = unused)."""
+    """One candidate start: `idx[j]` is the slot moved by `theta[j]` (`S` = unused);
+    a slot not `free` is held at `held` (physical: the case's `neutral`, except
+    where a start holds the nominal's map at the identity, `layout.prepare`)."""
 
     idx: Int[Array, " P"]
     theta0: Float[Array, " P"]
     tau: Int[Array, ""]
     free: Bool[Array, " S"]
+    held: Float[Array, " S"]
 
 
 def full_parameters(
@@ -190,7 +193,7 @@ def full_parameters(
     phys = jnp.where(is_abs, jnp.abs(raw), raw)
     phys = jnp.where(is_unit, UNIT_MAX * jax.nn.sigmoid(raw), phys)
     # `where`, not arithmetic, so the infinite neutral values never meet a tangent.
-    return jnp.where(row.free, phys, case.neutral)
+    return jnp.where(row.free, phys, row.held)
 
 
 def linear_polynomials(p: Float[Array, " S"], case: CaseArrays) -> tuple[Array, Array]:

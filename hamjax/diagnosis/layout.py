@@ -52,7 +52,13 @@ from .effects import (
     StartContext,
     TimeDelayEffect,
 )
-from .effects._base import FLIP_SIGN, REFIT_LINEAR, output_half_range, scale_span
+from .effects._base import (
+    FLIP_SIGN,
+    IDENTITY_MAP,
+    REFIT_LINEAR,
+    output_half_range,
+    scale_span,
+)
 from .effects.backlash import slide_init, slide_step, stick_slip_step
 from .effects.time_delay import delay_range, delay_shortlist, dominant_time_constant
 from .residuals import feedback_test, noise_std_differences
@@ -136,6 +142,7 @@ START_REACH = 1.1  # the start's first line reaches this many S either side
 # places (S, J) more roughly (its noise is twice the record's, its signal a rate)
 INTEGRATING_SPANS = (2.0, *REFINE_SPANS)
 INTEGRATOR_TOLERANCE = 1e-6  # a pole this close to 1 is an integrator's
+IDENTITY_PL = (1.0, 1.0, 0.0, 0.0, 0.0, 0.0)  # (k1, k2, d1, d2, l1, l2): F(v) = v
 
 
 def prior_weight(uncertainty: float | None, noise_std: float) -> float:
@@ -378,8 +385,7 @@ def stick_slip_profile(
     Beside hamjax's own discrete nominal (`refit_linear`, as
     `StartContext.refit_linear`) its denominator is no better than its numerator
     (poles fitted to a valve's limit cycle: a mode near $-1$, a near-integrator),
-    so where the best point keeps the nominal's map (its start can re-fit the
-    linear block) the denominator is re-fitted too, by variable projection there
+    so the denominator is re-fitted too, by variable projection at the best point
     (`_refit_denominator`: the output error over $A$, $b$ by least squares), at
     the order the row re-fits (`refit_linear_order`; from the nominal's $A$
     padded with zeros: a sticky record's own nominal is often of lower order
@@ -387,13 +393,19 @@ def stick_slip_profile(
     the grid scored again with it near that point's $f_s$, within four times
     `LOCAL_STEPS` (a factor of 2 either way: a wrong $A$ moved the best $f_s$ by
     a quarter in the tests), then within `LOCAL_STEPS`; up to
-    `DENOMINATOR_PASSES` times while the best SSE falls. There the re-fit
+    `DENOMINATOR_PASSES` times while the best SSE falls, with the best point's
+    map. There the re-fit
     start re-fits the whole linear block (`REFIT_LINEAR`) from the fitted $A$ and
     numerator (its changes `db..`, up to the lag a re-fit moves:
     `refit_linear_order`) with an output level $c$, fitted with them (slot
     `out_off`, a level beside the effect: `BacklashEffect.level`; where the
     record is a slice of a loop's operation, an integrating process's output
-    starts where its level was, not at rest); otherwise it is the gain
+    starts where its level was, not at rest), and a point scored with the
+    identity map holds the nominal's map there (`IDENTITY_MAP`: the row's
+    `held` map slots; before, its start freed the map's slots and kept the
+    nominal's $A$, not the profile's, and an integrating loop's row fitted the
+    valve it found with the poles of a nominal that had lost its integrator);
+    otherwise it is the gain
     $\sum b / \sum b_{nom}$ (both over the same $A$: the ratio of static
     gains; `{"gain": g}`); for the identity map `{"k1": g, "k2": g, "d1": 0,
     ...}` (the map's slots, which a re-fit frees, carry it).
@@ -534,9 +546,8 @@ def stick_slip_profile(
         found = score(a, t, fs, fd, maps)
         for k in range(DENOMINATOR_PASSES if refit_linear else 0):
             sse0, S0, J0, _, mapped, slot0, _ = found[0]
-            if not mapped:  # its start, the map's slots, keeps the nominal's A
-                break
-            u = mapped_input(valves(np.array([S0]), np.array([J0]), slot0))[0]
+            x = valves(np.array([S0]), np.array([J0]), slot0)
+            u = (mapped_input(x) if mapped else x)[0]
             # at the order the row re-fits (`refit_linear_order`): the
             # nominal's A with zeros beyond its own order to start from
             a_new = _refit_denominator(
@@ -547,7 +558,7 @@ def stick_slip_profile(
             f0 = (S0 + J0) / 2
             steps = LOCAL_STEPS * (4 if k == 0 else 1)  # the first: A moved f_s
             near = np.abs(np.log(fs / f0)) <= (steps + 0.5) * np.log(2.0) / 64
-            again = score(a_new, t, fs[near], fd[near], [True])
+            again = score(a_new, t, fs[near], fd[near], [mapped])
             if not again[0][0] < sse0:
                 break
             a, found = a_new, again
@@ -658,23 +669,61 @@ def _refit_start(
 ) -> dict[str, float]:
     """The re-fit's start of a profile point of fitted numerator `b` (at `lags`)
     over the denominator `a` (`stick_slip_profile`): in a `REFIT_LINEAR` row
-    (`linear`, with the nominal's map: `mapped`) that denominator, the
-    numerator's changes from the nominal's `b_nom` and the output level (`b`'s
-    last entry, `_free_numerator_sse`'s constant, slot `out_off`); otherwise
-    the ratio of the static gains, or where the point was scored without the
-    nominal's piecewise-linear map, that map at the gain times the identity."""
+    (`linear`) that denominator, the numerator's changes from the nominal's
+    `b_nom` and the output level (`b`'s last entry, `_free_numerator_sse`'s
+    constant, slot `out_off`), with the map held at the identity where the point
+    was scored without the nominal's piecewise-linear map (not `mapped`:
+    `IDENTITY_MAP`); otherwise the ratio of the static gains, or where the point
+    was scored without that map, the map at the gain times the identity."""
     total = float(np.sum(b_nom))
     g = float(np.sum(b[: lags.shape[0]])) / total if total != 0 else 1.0
-    if not mapped:
-        return {"k1": g, "k2": g, "d1": 0.0, "d2": 0.0, "l1": 0.0, "l2": 0.0}
     if not linear:
+        if not mapped:
+            return {"k1": g, "k2": g, "d1": 0.0, "d2": 0.0, "l1": 0.0, "l2": 0.0}
         return {"gain": g}
     nom = np.zeros(int(lags[-1]) + 1)
     k = min(b_nom.shape[0], nom.shape[0])
     nom[:k] = b_nom[:k]
     db = {f"db{j}": float(b[i] - nom[j]) for i, j in enumerate(lags)}
     den = {f"den{j}": float(a[j]) for j in range(1, a.shape[0])}
-    return {REFIT_LINEAR: 1.0, **den, **db, "out_off": float(b[-1])}
+    identity = {} if mapped else {IDENTITY_MAP: 1.0}
+    return {REFIT_LINEAR: 1.0, **identity, **den, **db, "out_off": float(b[-1])}
+
+
+def identity_twin_start(
+    nom: "Nominal", linear, dt: float, v: np.ndarray, y: np.ndarray, dens: list
+) -> dict[str, float]:
+    r"""The start of the `LINEAR_TWIN` that holds a piecewise-linear map at the
+    identity (`IDENTITY_MAP`): the linear block of the order a `REFIT_LINEAR`
+    row re-fits, fitted to `y` from `v` itself (no valve) by variable projection
+    (`_refit_denominator`, with the output level) from the nominal's $A$ and from
+    each denominator of `dens` (the profile's identity-map points), the best of
+    them by the estimation SSE, as `_refit_start` gives it.
+
+    The twin must start as close to its optimum as the rows it is the reference
+    of: from the nominal's numerator and poles (a nominal that took the valve's
+    dead band into its map and lost an integrating loop's integrator), its fit
+    stopped far above the noise floor on integrating loops without stiction,
+    and the play's rows, started from the profile's fit, beat it by a wide
+    likelihood ratio (four such loops of seeds 1-7 of the control-loop
+    benchmark, measured)."""
+    b_nom, a_nom = _discrete_tf(linear, dt)
+    order = refit_linear_order(nom)
+    lags = _numerator_lags(b_nom, order)
+    best = (np.inf, None, None)
+    for a0 in [a_nom, *dens]:
+        a0 = np.pad(a0, (0, max(order + 1 - a0.shape[0], 0)))[: order + 1]
+        a = _refit_denominator(v, y, a0, lags, level=True)
+        a = a0 if a is None else a
+        with np.errstate(over="ignore", invalid="ignore"):
+            sse, b = _free_numerator_sse(
+                lfilter_numpy(_ONE, a, v[None, :]), y, lags, level=True
+            )
+        if np.isfinite(sse[0]) and sse[0] < best[0]:
+            best = (sse[0], b[0], a)
+    if best[1] is None:
+        return {}
+    return _refit_start(best[1], b_nom, best[2], lags, False, True)
 
 
 def refit_linear_order(nom: "Nominal") -> int:
@@ -1111,7 +1160,11 @@ def prepare(
         else (0,)
     )
 
-    def _row(name, base, start, flip, tau):
+    identity = neutral.copy()  # a piecewise-linear map held at the identity
+    for n, x in zip(("k1", "k2", "d1", "d2", "l1", "l2"), IDENTITY_PL, strict=True):
+        identity[names.index(n)] = x
+
+    def _row(name, base, start, flip, tau, held=neutral):
         free_names = base + [n for n in start if n not in base]
         if len(free_names) > P:
             raise ValueError(
@@ -1131,6 +1184,7 @@ def prepare(
             theta0=np.asarray(theta0),
             tau=np.asarray(tau),
             free=np.asarray(free),
+            held=np.asarray(held),
         )
         return name, row
 
@@ -1142,6 +1196,8 @@ def prepare(
         for start in starts:
             if REFIT_LINEAR in start:
                 twin = {n: EFFECT_NEUTRAL[n] for n in start if n in effect.level}
+                if IDENTITY_MAP in start:  # the twin holds the same map
+                    twin[IDENTITY_MAP] = 1.0
                 if twin not in twins:
                     twins.append(twin)
         for start in starts:
@@ -1153,16 +1209,34 @@ def prepare(
             # a start's gain (the stick-slip profile's) only where the gain is
             # re-fitted (identity maps; elsewhere the map's slopes carry it)
             base = refit_linear if REFIT_LINEAR in start else refit
+            held = (
+                identity
+                if IDENTITY_MAP in start and nom.nl_kind == NL_PIECEWISE
+                else neutral
+            )
             start = {
                 n: x
                 for n, x in start.items()
-                if n not in (FLIP_SIGN, REFIT_LINEAR)
+                if n not in (FLIP_SIGN, REFIT_LINEAR, IDENTITY_MAP)
                 and (n != "gain" or "gain" in base)
             }
             for tau in taus:
-                rows.append(_row(effect.name, base, start, flip, tau))
+                rows.append(_row(effect.name, base, start, flip, tau, held))
     for twin in twins:
-        rows.append(_row(LINEAR_TWIN, refit_linear, twin, {}, 0))
+        held = identity if IDENTITY_MAP in twin else neutral
+        if IDENTITY_MAP in twin:  # from its own linear fit (`identity_twin_start`)
+            dens = [
+                np.r_[1.0, [s.get(f"den{j}", 0.0) for j in range(1, n_lin + 1)]]
+                for _, _, s, _ in ctx.stick_slip
+                if IDENTITY_MAP in s
+            ]
+            start = identity_twin_start(
+                nom, plant.linear, dt, np.asarray(v), np.asarray(est["y"]), dens
+            )
+            keep = set(refit_linear) | set(twin)  # its linear block and level
+            twin = {**twin, **{n: x for n, x in start.items() if n in keep}}
+        twin = {n: x for n, x in twin.items() if n != IDENTITY_MAP}
+        rows.append(_row(LINEAR_TWIN, refit_linear, twin, {}, 0, held))
     tab_v, tab_u, tab_d = _pad_table(nom.tab_v, nom.tab_u, nom.tab_d)
     v_est, m_est = _pad_record(est["v"], L)
     y_est, _ = _pad_record(est["y"], L)
@@ -1268,7 +1342,12 @@ def best_row_per_class(
     for its class only if it first beats its `LINEAR_TWIN` (the same linear
     re-fit with the effect held neutral) by the same nested ratio, the twin's
     row nesting it with the effect's own parameters the difference, confirmed
-    on validation. The twin stands for no class."""
+    on validation. The twin stands for no class. A row that holds the map at
+    the identity (`IDENTITY_MAP`) has a twin that holds it there too: against
+    the twin with the nominal's map the two would not be nested, and an
+    integrating loop without stiction whose fitted nominal's map was wrong
+    named the play for what the identity map alone explained (three loops of
+    seeds 1-4 of the control-loop benchmark, measured)."""
     names = slot_names(N_MAX)
     extension = {e.name: [names.index(s) for s in e.extension] for e in DETERMINISTIC}
     alternative = {
@@ -1291,8 +1370,14 @@ def best_row_per_class(
         if name == LINEAR_TWIN:
             continue
         if refits_linear(row):
-            # its twin: the linear re-fit whose free slots it frees too
-            k0 = [j for j in twin if np.all(row.free >= prep.rows[j][1].free)]
+            # its twin: the linear re-fit whose free slots it frees too, with
+            # the slots neither frees held at the same values (the map)
+            k0 = [
+                j
+                for j in twin
+                if np.all(row.free >= prep.rows[j][1].free)
+                and np.array_equal(row.held, prep.rows[j][1].held)
+            ]
             if not (k0 and beats(k, k0[0])):
                 continue
         if any(row.free[i] for i in alternative.get(name, [])):

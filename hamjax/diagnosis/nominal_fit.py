@@ -292,6 +292,7 @@ def _fit_structures(jobs: list, length: int) -> list:
                 theta0=theta[take],
                 tau=rows.tau[take],
                 free=rows.free[take],
+                held=rows.held[take],
             )
             fit = fit_padded(  # padded to `width` rows: one shape per length
                 batch,

@@ -566,6 +566,7 @@ def run_batch(
         theta0=np.stack([it.theta0 for it in take]),
         tau=pick("tau"),
         free=pick("free"),
+        held=pick("held"),
     )
     cases = jtu.tree_map(lambda x: x[np.asarray([it.case for it in take])], arrays)
     noisy = [(j, it.noise) for j, it in enumerate(take) if it.noise is not None]

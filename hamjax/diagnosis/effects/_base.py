@@ -56,7 +56,8 @@ class AbstractEffect(eqx.Module):
       a table's output scale), for an effect that hides the sign; the key
       `REFIT_LINEAR` (not a slot; offered only where `ctx.refit_linear`) re-fits
       the whole discrete linear block, numerator included (`db0..`), with the
-      static gain and map held at nominal.
+      static gain and map held at nominal, or with the key `IDENTITY_MAP` too,
+      a piecewise-linear map held at the identity.
     """
 
     name: ClassVar[str]
@@ -89,6 +90,10 @@ class AbstractEffect(eqx.Module):
 FLIP_SIGN = "flip_sign"  # a start key: the nominal re-fit starts with -G F
 # a start key: the row re-fits numerator and denominator of the nominal's own fit
 REFIT_LINEAR = "refit_linear"
+# a start key beside `REFIT_LINEAR`: the nominal's piecewise-linear map held at the
+# identity (the stick-slip profile's point scored without the map, whose dead band
+# a fitted nominal took from the valve: `layout.stick_slip_profile`)
+IDENTITY_MAP = "identity_map"
 
 UNIT_MAX = 0.995  # a unit-interval slot is 0.995 * sigmoid(raw): inside [0, 1), smooth
 

@@ -401,8 +401,8 @@ def stick_slip_profile(
     `out_off`, a level beside the effect: `BacklashEffect.level`; where the
     record is a slice of a loop's operation, an integrating process's output
     starts where its level was, not at rest), and a point scored with the
-    identity map holds the nominal's map there (`IDENTITY_MAP`: the row's
-    `held` map slots; before, its start freed the map's slots and kept the
+    identity map holds the map at the identity there (`IDENTITY_MAP`: the
+    row's `held` map slots; before, its start freed the map's slots and kept the
     nominal's $A$, not the profile's, and an integrating loop's row fitted the
     valve it found with the poles of a nominal that had lost its integrator);
     otherwise it is the gain
@@ -1160,7 +1160,9 @@ def prepare(
         else (0,)
     )
 
-    identity = neutral.copy()  # a piecewise-linear map held at the identity
+    # a piecewise-linear map held at the identity (`IDENTITY_MAP`: the profile
+    # scores the identity map beside a piecewise-linear nominal only)
+    identity = neutral.copy()
     for n, x in zip(("k1", "k2", "d1", "d2", "l1", "l2"), IDENTITY_PL, strict=True):
         identity[names.index(n)] = x
 
@@ -1209,11 +1211,7 @@ def prepare(
             # a start's gain (the stick-slip profile's) only where the gain is
             # re-fitted (identity maps; elsewhere the map's slopes carry it)
             base = refit_linear if REFIT_LINEAR in start else refit
-            held = (
-                identity
-                if IDENTITY_MAP in start and nom.nl_kind == NL_PIECEWISE
-                else neutral
-            )
+            held = identity if IDENTITY_MAP in start else neutral
             start = {
                 n: x
                 for n, x in start.items()

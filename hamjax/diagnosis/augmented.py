@@ -41,7 +41,10 @@ from jaxtyping import Array, Bool, Float, Int
 from .._filters import df2t_step, expm_taylor, filter_scan, zoh_tf
 from .._linalg import charpoly_adjugate, polymul
 from ..models.nonlinearities.backlash import Backlash, BacklashState
-from ..models.nonlinearities.piecewise_linear import piecewise_linear_map
+from ..models.nonlinearities.piecewise_linear import (
+    PARAMETERS as PL_PARAMETERS,
+    piecewise_linear_map,
+)
 from .effects._base import UNIT_MAX, StartContext, unit_raw
 from .effects.backlash import (
     BacklashEffect,
@@ -64,7 +67,7 @@ from .effects.saturation import SaturationEffect, saturate
 from .effects.time_delay import TimeDelayEffect, delay, fractional_split
 
 
-NOMINAL_SLOTS = ("k1", "k2", "d1", "d2", "l1", "l2", "in_scale", "out_scale", "gain")
+NOMINAL_SLOTS = (*PL_PARAMETERS, "in_scale", "out_scale", "gain")
 # The deterministic effects in the order of the signal chain above; each owns its
 # slots (neutral value, transform, scale) in its own file under `effects/`.
 CHAIN = (

@@ -22,7 +22,10 @@ from ..models import (
     Tabulated,
 )
 from ..models.hammerstein import fold_output_scale
-from ..models.nonlinearities.piecewise_linear import piecewise_linear_map
+from ..models.nonlinearities.piecewise_linear import (
+    PARAMETERS as PL_PARAMETERS,
+    piecewise_linear_map,
+)
 from .augmented import (
     EFFECT_NEUTRAL,
     EFFECT_SLOTS,
@@ -907,9 +910,7 @@ def describe_nominal(plant: Hammerstein) -> Nominal:
         kind = NL_IDENTITY
     elif isinstance(nl, PiecewiseLinear):
         kind = NL_PIECEWISE
-        pl = np.array(
-            [float(getattr(nl, k)) for k in ("k1", "k2", "d1", "d2", "l1", "l2")]
-        )
+        pl = np.array([float(getattr(nl, k)) for k in PL_PARAMETERS])
     elif isinstance(nl, Tabulated):
         kind = NL_TABULATED
         tab_v, tab_u, tab_d = _tables(
@@ -1090,9 +1091,7 @@ def prepare(
     names = slot_names(N_MAX)
     S = len(names)
     anchor, scale, neutral = np.zeros(S), np.ones(S), np.zeros(S)
-    nominal_values = dict(
-        zip(("k1", "k2", "d1", "d2", "l1", "l2"), nom.pl, strict=False)
-    )
+    nominal_values = dict(zip(PL_PARAMETERS, nom.pl, strict=False))
     nominal_values.update(in_scale=1.0, out_scale=1.0, gain=1.0)
     span = scale_span(ctx)
     for i, name in enumerate(NOMINAL_SLOTS):
@@ -1121,7 +1120,7 @@ def prepare(
         scale[i] = effect_scale[name]
     refit = [f"den{j + 1}" for j in den_free]
     if nom.nl_kind == NL_PIECEWISE:
-        refit += ["k1", "k2", "d1", "d2", "l1", "l2"]
+        refit += list(PL_PARAMETERS)
     elif nom.nl_kind in (NL_TABULATED, NL_BACKLASH):
         refit += ["in_scale", "out_scale"]
     else:
@@ -1163,7 +1162,7 @@ def prepare(
     # a piecewise-linear map held at the identity (`IDENTITY_MAP`: the profile
     # scores the identity map beside a piecewise-linear nominal only)
     identity = neutral.copy()
-    for n, x in zip(("k1", "k2", "d1", "d2", "l1", "l2"), IDENTITY_PL, strict=True):
+    for n, x in zip(PL_PARAMETERS, IDENTITY_PL, strict=True):
         identity[names.index(n)] = x
 
     def _row(name, base, start, flip, tau, held=neutral):

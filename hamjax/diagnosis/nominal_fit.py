@@ -49,6 +49,7 @@ import numpy as np
 from .._filters import lfilter_numpy
 from ..io.model_json import integrators
 from ..models import DiscreteTransferFunction, Hammerstein, Identity, PiecewiseLinear
+from ..models.nonlinearities.piecewise_linear import PARAMETERS as PL_PARAMETERS
 from ..simulation.sharding import effective_chunk
 from .augmented import Row, slot_names
 from .fit import LAMBDA0, SUCCESSFUL, fit_padded
@@ -151,9 +152,7 @@ def _read_structure(prep, p, sse, record, nl, b, a):
     sse = float(sse)
     exact = np.isfinite(sse) and np.sum(prep.arrays.m_est) == record["v"].shape[0]
     if isinstance(nl, PiecewiseLinear):
-        vals = {
-            s: float(p[names.index(s)]) for s in ("k1", "k2", "d1", "d2", "l1", "l2")
-        }
+        vals = {s: float(p[names.index(s)]) for s in PL_PARAMETERS}
         exact = exact and vals["d1"] >= 0.0 >= vals["d2"]
         vals["d1"], vals["d2"] = max(vals["d1"], 0.0), min(vals["d2"], 0.0)
         fitted = PiecewiseLinear(**vals)

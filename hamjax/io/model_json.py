@@ -19,6 +19,7 @@ from ..models import (
     Tabulated,
 )
 from ..models.hammerstein import fold_output_scale
+from ..models.nonlinearities.piecewise_linear import PARAMETERS as PL_PARAMETERS
 from .files import read_json
 
 
@@ -92,9 +93,7 @@ def nonlinearity_from_dict(obj: dict, where: str = "nonlinearity"):
         if kind == "identity":
             return Identity()
         if kind == "piecewise_linear":
-            p = {
-                k: _number(where, obj, k) for k in ("k1", "k2", "d1", "d2", "l1", "l2")
-            }
+            p = {k: _number(where, obj, k) for k in PL_PARAMETERS}
             return PiecewiseLinear(**p)
         if kind == "tabulated":
             return Tabulated(
@@ -211,7 +210,7 @@ def _static_to_dict(nl) -> dict:
     if isinstance(nl, PiecewiseLinear):
         return {
             "kind": "piecewise_linear",
-            **{k: float(getattr(nl, k)) for k in ("k1", "k2", "d1", "d2", "l1", "l2")},
+            **{k: float(getattr(nl, k)) for k in PL_PARAMETERS},
         }
     if isinstance(nl, Tabulated):
         return {

@@ -23,7 +23,10 @@ from jaxtyping import Array, ArrayLike, Bool, Float
 
 from .._checks import concrete
 from .._types import Params, Signal
-from ..models.nonlinearities.piecewise_linear import piecewise_linear_map
+from ..models.nonlinearities.piecewise_linear import (
+    PARAMETERS as PL_PARAMETERS,
+    piecewise_linear_map,
+)
 from ._discrete import (
     AbstractDiscreteParametrisation,
     discrete_response,
@@ -32,7 +35,7 @@ from ._discrete import (
 from .normalisation import normalise_b, sphere_coordinates, sphere_point
 
 
-_MAP = ("k1", "k2", "d1", "d2", "l1", "l2")
+_MAP = PL_PARAMETERS
 
 
 def smoothed_piecewise_linear(

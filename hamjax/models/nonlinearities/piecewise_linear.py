@@ -8,6 +8,10 @@ from ..._fields import float_field
 from ._base import AbstractStaticNonlinearity
 
 
+# The six numbers of Fig. 2 of seed 001, in the order every user of them keeps.
+PARAMETERS = ("k1", "k2", "d1", "d2", "l1", "l2")
+
+
 def piecewise_linear_map(v, k1, k2, d1, d2, l1, l2, *, xp=jnp):
     """Fig. 2 of seed 001 on `v` from its six numbers (the one implementation:
     `PiecewiseLinear`, the refinement, the diagnosis and the blind cases call it).
@@ -44,7 +48,7 @@ class PiecewiseLinear(AbstractStaticNonlinearity):
     l2: Float[Array, ""] = float_field(kw_only=True, default=0.0)
 
     def __check_init__(self):
-        for name in ("k1", "k2", "d1", "d2", "l1", "l2"):
+        for name in PARAMETERS:
             if jnp.shape(getattr(self, name)) != ():
                 raise ValueError(f"PiecewiseLinear.{name} must be a scalar")
         d1, d2 = concrete(self.d1), concrete(self.d2)
@@ -66,6 +70,6 @@ class PiecewiseLinear(AbstractStaticNonlinearity):
 
     def replace(self, **kwargs) -> "PiecewiseLinear":
         """A copy with some of `k1, k2, d1, d2, l1, l2` changed."""
-        fields = {n: getattr(self, n) for n in ("k1", "k2", "d1", "d2", "l1", "l2")}
+        fields = {n: getattr(self, n) for n in PARAMETERS}
         fields.update(kwargs)
         return PiecewiseLinear(**fields)

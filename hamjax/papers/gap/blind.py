@@ -50,7 +50,10 @@ from ...models import (
     PiecewiseLinear,
     Tabulated,
 )
-from ...models.nonlinearities.piecewise_linear import piecewise_linear_map
+from ...models.nonlinearities.piecewise_linear import (
+    PARAMETERS as PL_PARAMETERS,
+    piecewise_linear_map,
+)
 from ...signals import prbs
 
 
@@ -152,7 +155,7 @@ def _static(nl, v: np.ndarray) -> np.ndarray:
     if isinstance(nl, Identity):
         return v.copy()
     if isinstance(nl, PiecewiseLinear):
-        numbers = (float(getattr(nl, k)) for k in ("k1", "k2", "d1", "d2", "l1", "l2"))
+        numbers = (float(getattr(nl, k)) for k in PL_PARAMETERS)
         return piecewise_linear_map(v, *numbers, xp=np)
     return np.interp(v, np.asarray(nl.v), np.asarray(nl.u))
 
@@ -395,7 +398,7 @@ def _perturb_linear(linear, d: _Draw, size: float):
 
 def _perturb_nl(nl, d: _Draw, size: float):
     if isinstance(nl, PiecewiseLinear):
-        vals = {k: float(getattr(nl, k)) for k in ("k1", "k2", "d1", "d2", "l1", "l2")}
+        vals = {k: float(getattr(nl, k)) for k in PL_PARAMETERS}
         vals = {
             k: x + size * d.uniform(-1, 1) * (abs(x) + 0.1) for k, x in vals.items()
         }

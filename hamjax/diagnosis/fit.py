@@ -564,18 +564,11 @@ def _starts_on_validation(
 _starts_on_validations = jax.jit(jax.vmap(_starts_on_validation, (0, 0, None)))
 
 
-def frees_valve_start(row: Row) -> bool:
-    """Whether the row fits the valve's start (`valve_start`: the stick-slip
-    profile's starts)."""
-    free = np.asarray(row.free)
-    return bool(free[slot_index("valve_start", n_max_of(free.shape[-1]))])
-
-
 def validation_start(
     params: np.ndarray, rows: list, case: CaseArrays, *, batch: int = 1
 ) -> np.ndarray:
     """The validation outputs `(R, L)` of rows that fit the valve's start
-    (`frees_valve_start`) at their fitted `params` `(R, S)`, each with the
+    (`layout.frees_valve_start`) at their fitted `params` `(R, S)`, each with the
     validation record's own start: as the estimation record's, that is an
     initial state (where the valve was stuck when the record began), estimated
     there by the least simulation SSE over `VALIDATION_STARTS` starts within

@@ -37,8 +37,10 @@ from .augmented import (
     CaseArrays,
     Row,
     effect_scales,
+    n_max_of,
     numerator_slots,
     raw_from_physical,
+    slot_index,
     slot_names,
 )
 from .effects import (
@@ -1402,6 +1404,13 @@ def refits_linear(row: Row) -> bool:
     """Whether `row` re-fits the numerator too (a `REFIT_LINEAR` start)."""
     names = slot_names(N_MAX)
     return any(row.free[names.index(n)] for n in numerator_slots(N_MAX))
+
+
+def frees_valve_start(row: Row) -> bool:
+    """Whether the row fits the valve's start (`valve_start`: the stick-slip
+    profile's starts)."""
+    free = np.asarray(row.free)
+    return bool(free[slot_index("valve_start", n_max_of(free.shape[-1]))])
 
 
 def starts_at_nominal_numerator(row: Row) -> bool:

@@ -61,7 +61,6 @@ from .fit import (
     SUCCESSFUL,
     RowFit,
     fit_padded,
-    frees_valve_start,
     theta_std,
     validation_start,
 )
@@ -70,6 +69,7 @@ from .layout import (
     Prepared,
     best_row_per_class,
     finite_sse,
+    frees_valve_start,
     refits_linear,
     starts_at_nominal_numerator,
     validation_sse,
@@ -306,7 +306,7 @@ def merge(fits: dict, item: Item, new: dict) -> None:
 
 def validation_starts(prep: Prepared, fits: dict, rows=None) -> None:
     """The validation output of each row that fits the valve's start
-    (`fit.frees_valve_start`), among `rows` (None: all), simulated from the
+    (`layout.frees_valve_start`), among `rows` (None: all), simulated from the
     validation record's own start (`fit.validation_start`), in place: once the
     case's rows are finished (screening judges them started at $v_0$), and once
     their prediction-error fits are."""

@@ -91,10 +91,12 @@ def main(argv=None) -> None:
     args = parser.parse_args(argv)
 
     import hamjax
-    from hamjax._runtime import split_cpu_into_devices
+    from hamjax._runtime import same_rounding_in_every_lane, split_cpu_into_devices
     from hamjax.diagnosis.probabilities import STICTION_LIKE
 
     split_cpu_into_devices()
+
+    same_rounding_in_every_lane()  # as `hamjax` runs
     hamjax.enable_x64()
     result: dict = {"cases_per_seed": args.cases, "seeds": {}}
     pooled = {s: np.zeros(6, int) for s in args.start}

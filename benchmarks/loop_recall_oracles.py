@@ -119,7 +119,7 @@ def _patch(mode: str, truths: dict) -> None:
             nominal = augmented.memory_arguments(p, case)[-1]
             return (v0, zero, slide_init(zero), nominal.init(v0))
 
-        def valve_at_rest(v0, width):
+        def valve_at_rest(v0, width, start=None):  # the fitted start ignored
             zero = jnp.zeros(width.shape)
             return v0, zero, slide_init(zero)
 
@@ -130,9 +130,11 @@ def _patch(mode: str, truths: dict) -> None:
 def _one(seed: int, n_cases: int, mode: str) -> dict:
     """Diagnose the seed's sticky loops under `mode`; the figures of `main`."""
     import hamjax
-    from hamjax._runtime import split_cpu_into_devices
+    from hamjax._runtime import same_rounding_in_every_lane, split_cpu_into_devices
 
     split_cpu_into_devices()
+
+    same_rounding_in_every_lane()  # as `hamjax` runs
     hamjax.enable_x64()
     from hamjax.diagnosis import attribute as at
     from hamjax.diagnosis.layout import finite_sse, validation_sse

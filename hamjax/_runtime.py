@@ -1,6 +1,7 @@
 """Process-wide runtime settings applied at the entry points (CLI, tests)."""
 
 import os
+import platform
 
 
 _EIGEN_FLAG = "--xla_cpu_multi_thread_eigen=false"
@@ -17,6 +18,29 @@ def avoid_eigen_pool_hang() -> None:
     backend starts); set `XLA_FLAGS=--xla_cpu_multi_thread_eigen=true` to opt out.
     """
     _add_xla_flag(_EIGEN_FLAG)
+
+
+_ISA_FLAG = "--xla_cpu_max_isa=AVX2"
+
+
+def same_rounding_in_every_lane() -> None:
+    """Cap XLA's CPU code at AVX2 on x86-64 unless the user chose an ISA.
+
+    On a CPU with AVX-512, XLA's code for a `vmap`ped scan rounds some lanes of a
+    batch differently from the others: a direct-form filter over 16 lanes gave
+    lanes 12-15 outputs ~1e-15 off what the same lane gave elsewhere in the
+    batch. A row's fit then depended on where in its batch it ran, so on which
+    other cases were diagnosed in the same call, and the stick-slip profile's
+    search can turn such a difference into another name (a control loop named
+    `backlash` among the benchmark's 40 sticky loops and `coloured_noise` alone
+    or among all 80). With AVX2 as the highest ISA every lane runs the same
+    instructions (tested: `tests/test_runtime.py`), at the same speed on these
+    fits (40 loops in one call: 73.9 s against 72.5 and 74.3 s). Must run before
+    the first computation, as `avoid_eigen_pool_hang`; set `XLA_FLAGS=
+    --xla_cpu_max_isa=...` to choose otherwise. Other platforms: a no-op.
+    """
+    if platform.machine().lower() in ("x86_64", "amd64"):
+        _add_xla_flag(_ISA_FLAG)
 
 
 def _add_xla_flag(flag: str) -> None:

@@ -9,10 +9,11 @@ from pathlib import Path
 
 import pytest
 
-from hamjax._runtime import avoid_eigen_pool_hang
+from hamjax._runtime import avoid_eigen_pool_hang, same_rounding_in_every_lane
 
 
 avoid_eigen_pool_hang()  # before jax starts its backend; see the docstring
+same_rounding_in_every_lane()  # likewise
 # One folder of compiled XLA programs for the whole test session, shared by the
 # xdist workers (they inherit this environment) and the `hamjax` children that the
 # CLI tests start (`HAMJAX_CACHE_DIR`, `_runtime.use_compilation_cache`), never the

@@ -1,4 +1,4 @@
-"""Process-wide runtime settings: the on-disk compilation cache."""
+"""Process-wide runtime settings: the on-disk compilation cache, the ISA cap."""
 
 import jax
 
@@ -21,3 +21,45 @@ def test_compilation_cache_folder_and_opt_out(tmp_path, monkeypatch):
         assert (tmp_path / "xdg" / "hamjax" / "xla").is_dir()
     finally:
         jax.config.update("jax_compilation_cache_dir", before)
+
+
+def test_every_lane_of_a_batched_filter_rounds_alike():
+    """A row's result must not depend on where in a batch it runs (so a case's
+    diagnosis on which other cases share its call): 16 direct-form filters of
+    orders 1-3 padded to one length, as the diagnosis's fits run them, each
+    bitwise the same at every position of the batch. With XLA's code for
+    AVX-512 lanes 12-15 came out ~1e-14 off (`same_rounding_in_every_lane`,
+    which conftest applies as the CLI does)."""
+    import jax.numpy as jnp
+    import numpy as np
+
+    from hamjax._filters import filter_scan
+
+    rng = np.random.default_rng(1)
+    lanes, n = 16, 7
+    b, a = np.zeros((lanes, n)), np.zeros((lanes, n))
+    for i in range(lanes):
+        order = 1 + i % 3
+        a[i, : order + 1] = np.poly(rng.uniform(0.3, 0.95, order))
+        b[i, 1 : order + 1] = 0.05 * rng.normal(size=order)
+    u = rng.normal(size=(lanes, 4096))
+    run = jax.jit(jax.vmap(lambda b, a, u: filter_scan(b, a, u, jnp.zeros(n - 1))[1]))
+    y = np.asarray(run(b, a, u))
+    for shift in range(1, lanes):
+        at = np.roll(np.arange(lanes), shift)
+        np.testing.assert_array_equal(np.asarray(run(b[at], a[at], u[at])), y[at])
+
+
+def test_the_isa_cap_leaves_a_user_choice_and_other_platforms(monkeypatch):
+    from hamjax import _runtime
+
+    monkeypatch.setenv("XLA_FLAGS", "--xla_cpu_max_isa=AVX")
+    _runtime.same_rounding_in_every_lane()
+    assert _runtime.os.environ["XLA_FLAGS"] == "--xla_cpu_max_isa=AVX"
+    monkeypatch.setenv("XLA_FLAGS", "")
+    monkeypatch.setattr(_runtime.platform, "machine", lambda: "aarch64")
+    _runtime.same_rounding_in_every_lane()
+    assert _runtime.os.environ["XLA_FLAGS"] == ""
+    monkeypatch.setattr(_runtime.platform, "machine", lambda: "x86_64")
+    _runtime.same_rounding_in_every_lane()
+    assert _runtime.os.environ["XLA_FLAGS"] == "--xla_cpu_max_isa=AVX2"

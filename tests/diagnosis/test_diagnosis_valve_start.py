@@ -14,7 +14,6 @@ from hamjax.diagnosis.augmented import (
 from hamjax.diagnosis.fit import (
     VALIDATION_STARTS,
     _starts_on_validations,
-    frees_valve_start,
     validation_start,
 )
 from hamjax.diagnosis.layout import (
@@ -23,6 +22,7 @@ from hamjax.diagnosis.layout import (
     _valve_positions,
     bucket,
     describe_nominal,
+    frees_valve_start,
     prepare,
     stick_slip_profile,
 )

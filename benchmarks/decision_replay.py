@@ -257,7 +257,6 @@ def main(argv=None) -> None:
     from hamjax._runtime import same_rounding_in_every_lane, split_cpu_into_devices
 
     split_cpu_into_devices()
-
     same_rounding_in_every_lane()  # as `hamjax` runs
     hamjax.enable_x64()
     from hamjax.diagnosis.diagnose import RULES

@@ -95,7 +95,6 @@ def main(argv=None) -> None:
     from hamjax.diagnosis.probabilities import STICTION_LIKE
 
     split_cpu_into_devices()
-
     same_rounding_in_every_lane()  # as `hamjax` runs
     hamjax.enable_x64()
     result: dict = {"cases_per_seed": args.cases, "seeds": {}}

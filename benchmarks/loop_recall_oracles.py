@@ -133,7 +133,6 @@ def _one(seed: int, n_cases: int, mode: str) -> dict:
     from hamjax._runtime import same_rounding_in_every_lane, split_cpu_into_devices
 
     split_cpu_into_devices()
-
     same_rounding_in_every_lane()  # as `hamjax` runs
     hamjax.enable_x64()
     from hamjax.diagnosis import attribute as at

@@ -35,8 +35,11 @@ def same_rounding_in_every_lane() -> None:
     `backlash` among the benchmark's 40 sticky loops and `coloured_noise` alone
     or among all 80). With AVX2 as the highest ISA every lane runs the same
     instructions (tested: `tests/test_runtime.py`), at the same speed on these
-    fits (40 loops in one call: 73.9 s against 72.5 and 74.3 s). Must run before
-    the first computation, as `avoid_eigen_pool_hang`; set `XLA_FLAGS=
+    fits (40 loops in one call: 73.9 s against 72.5 and 74.3 s). Applied where
+    cases are diagnosed (`hamjax diagnose`, `demo` and the studies that diagnose),
+    not to the Monte Carlo simulations, which it slowed by about a fifth
+    (`benchmark_throughput.py --quick`) and whose results are continuous. Must run
+    before the first computation, as `avoid_eigen_pool_hang`; set `XLA_FLAGS=
     --xla_cpu_max_isa=...` to choose otherwise. Other platforms: a no-op.
     """
     if platform.machine().lower() in ("x86_64", "amd64"):

@@ -48,6 +48,23 @@ def test_every_lane_of_a_batched_filter_rounds_alike():
     for shift in range(1, lanes):
         at = np.roll(np.arange(lanes), shift)
         np.testing.assert_array_equal(np.asarray(run(b[at], a[at], u[at])), y[at])
+    # and in batches of other widths (another device count splits them so)
+    for width in (1, 3, 5, 8):
+        for s in range(0, lanes, width):
+            at = slice(s, s + width)
+            np.testing.assert_array_equal(np.asarray(run(b[at], a[at], u[at])), y[at])
+
+
+def test_the_studies_that_diagnose_ask_for_the_cap():
+    from hamjax.cli.study import STUDY_PACKAGES
+    from hamjax.montecarlo.registry import discover_studies
+
+    studies = discover_studies(STUDY_PACKAGES)
+    assert {n for n, s in studies.items() if s.diagnoses} == {
+        "blind-benchmark",
+        "real-data-gap",
+    }
+    assert not studies["simulation-throughput"].diagnoses
 
 
 def test_the_isa_cap_leaves_a_user_choice_and_other_platforms(monkeypatch):

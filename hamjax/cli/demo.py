@@ -7,6 +7,7 @@ from pathlib import Path
 
 import jax.random as jr
 
+from .._runtime import same_rounding_in_every_lane
 from ._common import optional_module
 
 
@@ -46,6 +47,7 @@ def run(args: argparse.Namespace) -> int:
     matplotlib.use("Agg")
     out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)
+    same_rounding_in_every_lane()  # it diagnoses; before the first computation
     key = jr.key(args.seed)
     lines, failed = [], 0
     start = time.perf_counter()

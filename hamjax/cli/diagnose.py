@@ -240,9 +240,10 @@ def _clear(args, earlier: list, any_read: bool, me: int, n_proc: int, verbose) -
 
 
 def run(args: argparse.Namespace) -> int:
-    from .._runtime import split_cpu_into_devices
+    from .._runtime import same_rounding_in_every_lane, split_cpu_into_devices
 
     split_cpu_into_devices()  # before the first computation
+    same_rounding_in_every_lane()  # likewise
     start_cluster(args)
     import jax
 

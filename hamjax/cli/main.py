@@ -61,15 +61,10 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the console script and of `python -m hamjax`."""
     from .._errors import UserInputError
-    from .._runtime import (
-        avoid_eigen_pool_hang,
-        same_rounding_in_every_lane,
-        use_compilation_cache,
-    )
+    from .._runtime import avoid_eigen_pool_hang, use_compilation_cache
     from .._x64 import enable_x64
 
     avoid_eigen_pool_hang()
-    same_rounding_in_every_lane()
     enable_x64()
     use_compilation_cache()
     argv = sys.argv[1:] if argv is None else argv

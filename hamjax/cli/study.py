@@ -106,10 +106,12 @@ def run(args: argparse.Namespace) -> int:
 
 def run_study(study, args: argparse.Namespace) -> int:
     """Run `study` with parsed `args`; print where the results are."""
-    from .._runtime import split_cpu_into_devices
+    from .._runtime import same_rounding_in_every_lane, split_cpu_into_devices
 
     if study.split_cpu:  # its batched fits shard over devices
         split_cpu_into_devices()
+    if study.diagnoses:  # a case's names must not depend on its batch
+        same_rounding_in_every_lane()
     import jax
     import jax.random as jr
 

@@ -11,7 +11,9 @@ A study module defines
   options, read in `run` with `option_values(args, OPTIONS)`; optional
   `DEFAULT_REALISATIONS` and `DEFAULT_CHUNK`, optional `SPLIT_CPU = True` when
   its work shards over devices and `hamjax study` should expose each CPU core as
-  a JAX device before starting,
+  a JAX device before starting, optional `DIAGNOSES = True` when it diagnoses
+  cases, whose names must not depend on the cases batched with them
+  (`hamjax study` then caps XLA's ISA, `_runtime.same_rounding_in_every_lane`),
 - `run(key, *, realisations, chunk, out, quiet, args) -> dict`, which writes its
   figures and a JSON summary into the folder `out` and returns the summary.
 
@@ -40,6 +42,7 @@ class Study:
     default_realisations: int = 1000
     default_chunk: int = 256
     split_cpu: bool = False
+    diagnoses: bool = False
 
 
 _REGISTERED: dict[str, Study] = {}
@@ -151,6 +154,7 @@ def _from_module(module) -> Study:
         default_realisations=getattr(module, "DEFAULT_REALISATIONS", 1000),
         default_chunk=getattr(module, "DEFAULT_CHUNK", 256),
         split_cpu=bool(getattr(module, "SPLIT_CPU", False)),
+        diagnoses=bool(getattr(module, "DIAGNOSES", False)),
     )
 
 

@@ -18,6 +18,7 @@ DESCRIPTION = (
 DEFAULT_REALISATIONS = 240
 DEFAULT_CHUNK = 4  # cases per batch (`diagnosis.schedule.CASES_PER_BATCH`)
 SPLIT_CPU = True  # `hamjax study` exposes each core as a device first
+DIAGNOSES = True  # and caps XLA's ISA (`_runtime.same_rounding_in_every_lane`)
 
 
 OPTIONS = (

@@ -16,6 +16,7 @@ DESCRIPTION = (
 DEFAULT_REALISATIONS = 80  # stiction loops included
 DEFAULT_CHUNK = 4  # cases per batch (`diagnosis.schedule.CASES_PER_BATCH`)
 SPLIT_CPU = True  # `hamjax study` exposes each core as a device first
+DIAGNOSES = True  # and caps XLA's ISA (`_runtime.same_rounding_in_every_lane`)
 # Published best simulation RMSE on the same split (the literature column only:
 # nothing in the diagnosis reads it).
 PUBLISHED_RMSE = {

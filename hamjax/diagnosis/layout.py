@@ -37,10 +37,8 @@ from .augmented import (
     CaseArrays,
     Row,
     effect_scales,
-    n_max_of,
     numerator_slots,
     raw_from_physical,
-    slot_index,
     slot_names,
 )
 from .effects import (
@@ -1409,8 +1407,7 @@ def refits_linear(row: Row) -> bool:
 def frees_valve_start(row: Row) -> bool:
     """Whether the row fits the valve's start (`valve_start`: the stick-slip
     profile's starts)."""
-    free = np.asarray(row.free)
-    return bool(free[slot_index("valve_start", n_max_of(free.shape[-1]))])
+    return bool(np.asarray(row.free)[slot_names(N_MAX).index("valve_start")])
 
 
 def starts_at_nominal_numerator(row: Row) -> bool:

@@ -35,9 +35,6 @@ from ._discrete import (
 from .normalisation import normalise_b, sphere_coordinates, sphere_point
 
 
-_MAP = PL_PARAMETERS
-
-
 def smoothed_piecewise_linear(
     params: Float[Array, " 6"], v: Signal, width: Float[ArrayLike, ""] | None
 ) -> Signal:
@@ -92,7 +89,7 @@ class PiecewiseLinearParametrisation(AbstractDiscreteParametrisation):
 
     @property
     def names(self) -> tuple[str, ...]:
-        return self._ab_names() + _MAP
+        return self._ab_names() + PL_PARAMETERS
 
     def predict(self, theta: Params, v: Signal) -> Signal:
         a, delta, m = self._split(theta)

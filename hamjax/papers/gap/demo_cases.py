@@ -8,9 +8,17 @@ from .blind import _lfilter, _Truth
 
 
 DT = 0.05
-NOMINAL = Hammerstein(
-    Identity(), DiscreteTransferFunction([0.0, 0.2, 0.1], [1.0, -1.1, 0.4], DT)
-)
+
+
+def nominal() -> Hammerstein:
+    """The nominal model of every demo case. Built on each call, not when this
+    module is imported: its arrays then take the precision in force (float64 once
+    `hamjax.enable_x64` has run, whatever the order of the imports)."""
+    return Hammerstein(
+        Identity(), DiscreteTransferFunction([0.0, 0.2, 0.1], [1.0, -1.1, 0.4], DT)
+    )
+
+
 # textbook-form parameters of each effect on the nominal above (inputs in [-1, 1])
 EXACT_PARAMS = {
     "backlash": {"c": 0.3},
@@ -37,14 +45,15 @@ def tiny_case(key, effect: str, *, n: int = 400, noise: float = 1e-4) -> tuple:
     noise of std `noise` (drawn from `key`).
     """
     k_est, k_val, k_e1, k_e2 = jr.split(key, 4)
-    truth = _Truth(NOMINAL, effect, EXACT_PARAMS.get(effect, {}), realistic=False)
+    plant = nominal()
+    truth = _Truth(plant, effect, EXACT_PARAMS.get(effect, {}), realistic=False)
     recs = []
     for k_in, k_noise in ((k_est, k_e1), (k_val, k_e2)):
         v = staircase(k_in, n)
         w = truth.output(v, DT)
         y = w + noise * np.asarray(jr.normal(k_noise, (n,)))
         recs.append({"t": np.arange(n) * DT, "v": v, "y": y})
-    return NOMINAL, DT, recs[0], recs[1]
+    return plant, DT, recs[0], recs[1]
 
 
 def coloured_case(key, *, n: int = 400, pole: float = 0.9, std: float = 0.02) -> tuple:

@@ -52,7 +52,7 @@ def child(config: str, cases: list[str], out: str) -> None:
     elif extra is not None:
         fit.PROGRAMS.compiler_options = {**fit.PROGRAMS.compiler_options, **extra}
     times = {"lower": 0.0, "compile": 0.0}
-    lower, compile_ = fit.PROGRAMS.programs["sharded"].lower, fit.PROGRAMS._compile
+    lower, compile_ = fit.PROGRAMS.programs["one"].lower, fit.PROGRAMS._compile
 
     class Timed:
         def lower(self, *args, **kwargs):
@@ -67,7 +67,7 @@ def child(config: str, cases: list[str], out: str) -> None:
         times["compile"] += time.perf_counter() - t
         return out
 
-    fit.PROGRAMS.programs["sharded"] = Timed()
+    fit.PROGRAMS.programs["one"] = Timed()
     fit.PROGRAMS._compile = timed_compile
     t_import = time.perf_counter() - t_start
     status = main(["diagnose", *cases, "--out", out])

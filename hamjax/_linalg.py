@@ -5,6 +5,27 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 
+def fixed_order_sum(x: Float[Array, "*batch n"]) -> Float[Array, "*batch"]:
+    """The sum of `x` along its last axis, in a pairwise order fixed by `n` alone.
+
+    `jnp.sum` and `@` leave the order of their additions to XLA, which chooses it
+    by the shape of the whole (vmapped) operation: the same row summed in batches
+    of 16 and of 32 lanes, or on one device and on two, could differ in the last
+    digits (up to 6e-14 in 256 samples, measured). Here every addition is
+    elementwise (halves of the zero-padded axis added until one is left), and an
+    elementwise addition rounds alike in every lane and every batch: a result
+    depends on its own row, never on the rows beside it. Pairwise, it is also
+    more accurate than a running sum (error $O(\\varepsilon \\log n)$).
+    """
+    n = x.shape[-1]
+    width = 1 << max(n - 1, 0).bit_length()
+    x = jnp.pad(x, [(0, 0)] * (x.ndim - 1) + [(0, width - n)])
+    while x.shape[-1] > 1:
+        half = x.shape[-1] // 2
+        x = x[..., :half] + x[..., half:]
+    return x[..., 0]
+
+
 def cholesky_solve(
     A: Float[Array, " n n"], b: Float[Array, " n *k"]
 ) -> Float[Array, " n *k"]:
@@ -21,7 +42,7 @@ def cholesky_solve(
     idx = jnp.arange(n)
 
     def column(j, L):  # columns >= j of L are still zero
-        c = A[:, j] - L @ L[j]
+        c = A[:, j] - fixed_order_sum(L * L[j][None])
         return L.at[:, j].set(jnp.where(idx >= j, c / jnp.sqrt(c[j]), 0.0))
 
     # Loops, not unrolled: the same arithmetic in a fraction of the compiled program.
@@ -29,11 +50,11 @@ def cholesky_solve(
     x = b[:, None] if b.ndim == 1 else b
 
     def forward(i, y):  # rows >= i of y are still zero
-        return y.at[i].set((x[i] - L[i] @ y) / L[i, i])
+        return y.at[i].set((x[i] - fixed_order_sum(L[i][None] * y.T)) / L[i, i])
 
     def backward(k, z):  # rows <= i of z are still zero
         i = n - 1 - k
-        return z.at[i].set((y[i] - L[:, i] @ z) / L[i, i])
+        return z.at[i].set((y[i] - fixed_order_sum(L[:, i][None] * z.T)) / L[i, i])
 
     y = lax.fori_loop(0, n, forward, jnp.zeros_like(x))
     z = lax.fori_loop(0, n, backward, jnp.zeros_like(x))

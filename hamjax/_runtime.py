@@ -20,27 +20,35 @@ def avoid_eigen_pool_hang() -> None:
     _add_xla_flag(_EIGEN_FLAG)
 
 
-_ISA_FLAG = "--xla_cpu_max_isa=AVX2"
+_ISA_FLAG = "--xla_cpu_max_isa=AVX"
 
 
 def same_rounding_in_every_lane() -> None:
-    """Cap XLA's CPU code at AVX2 on x86-64 unless the user chose an ISA.
+    """Cap XLA's CPU code at AVX (no fused multiply-add) on x86-64 unless the user
+    chose an ISA.
 
-    On a CPU with AVX-512, XLA's code for a `vmap`ped scan rounds some lanes of a
-    batch differently from the others: a direct-form filter over 16 lanes gave
-    lanes 12-15 outputs ~1e-15 off what the same lane gave elsewhere in the
-    batch. A row's fit then depended on where in its batch it ran, so on which
-    other cases were diagnosed in the same call, and the stick-slip profile's
-    search can turn such a difference into another name (a control loop named
-    `backlash` among the benchmark's 40 sticky loops and `coloured_noise` alone
-    or among all 80). With AVX2 as the highest ISA every lane runs the same
-    instructions (tested: `tests/test_runtime.py`), at the same speed on these
-    fits (40 loops in one call: 73.9 s against 72.5 and 74.3 s). Applied where
-    cases are diagnosed (`hamjax diagnose`, `demo` and the studies that diagnose),
-    not to the Monte Carlo simulations, which it slowed by about a fifth
-    (`benchmark_throughput.py --quick`) and whose results are continuous. Must run
-    before the first computation, as `avoid_eigen_pool_hang`; set `XLA_FLAGS=
-    --xla_cpu_max_isa=...` to choose otherwise. Other platforms: a no-op.
+    A row's fit must not depend on the rows beside it (which other cases share
+    the call), nor on how many lanes a device runs (the device count). Two
+    things made it so, both seen to change a control loop's name:
+    - on a CPU with AVX-512, XLA's code for a `vmap`ped scan rounded lanes 12-15
+      of a 16-lane batch ~1e-15 off what the same lane gave elsewhere (a loop
+      named `backlash` among the benchmark's 40 sticky loops, `coloured_noise`
+      alone or among all 80);
+    - with FMA, whether `a * b + c` rounds once or twice depends on how XLA fuses
+      the operations, which depends on the batch's width: a recursion with a
+      `tanh` in it came out 1e-14 apart at widths up to 16 and from 32 on (11
+      of seed 3's 40 sticky loops not bitwise the same on one device and on two,
+      at AVX2).
+    Without FMA every operation rounds once wherever XLA puts it; with the
+    reductions in a fixed order (`_linalg.fixed_order_sum`) the 40 loops are
+    bitwise the same on one device and on two (tested: `tests/test_runtime.py`),
+    at the same speed (104 s against 101-104 s at AVX2, 2 devices). Applied where
+    cases are diagnosed (`hamjax diagnose`, `demo` and the studies that
+    diagnose), not to the Monte Carlo simulations, which a cap slowed by about a
+    fifth (`benchmark_throughput.py --quick`) and whose results are continuous.
+    Must run before the first computation, as `avoid_eigen_pool_hang`; set
+    `XLA_FLAGS=--xla_cpu_max_isa=...` to choose otherwise. Other platforms: a
+    no-op (there a fit may round differently at another batch width).
     """
     if platform.machine().lower() in ("x86_64", "amd64"):
         _add_xla_flag(_ISA_FLAG)

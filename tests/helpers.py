@@ -71,7 +71,9 @@ def run_on_two_devices(script: str, tmp_path, *, timeout: float = 600):
     path.write_text(script)
     env = {
         **os.environ,
-        "XLA_FLAGS": "--xla_force_host_platform_device_count=2",
+        # the parent's flags too (conftest's ISA cap: the same instructions)
+        "XLA_FLAGS": os.environ.get("XLA_FLAGS", "")
+        + " --xla_force_host_platform_device_count=2",
         "JAX_PLATFORMS": "cpu",
         "PYTHONPATH": str(repo),
     }

@@ -5,7 +5,6 @@ fitting layer's (`fitting.least_squares` with `BatchedLevenbergMarquardt`, the
 same interface and `RESULTS` as `refine`'s optimistix solvers); this module gives
 it the rows' blocked normal equations and the compiled batch programs."""
 
-import functools as ft
 from collections.abc import Callable
 
 import equinox as eqx
@@ -13,9 +12,9 @@ import jax
 import jax.lax as lax
 import jax.numpy as jnp
 import numpy as np
-from jax.sharding import Mesh, PartitionSpec
 from jaxtyping import Array, Bool, Float, Int
 
+from .._linalg import fixed_order_sum
 from .._results import RESULTS
 from ..fitting import (
     BatchedLevenbergMarquardt,
@@ -249,7 +248,9 @@ def _normal_equations(theta_ext, row, case, flags):
         J = jnp.where(ok[None], dy * (mb / case.y_scale)[None], 0.0)  # [P, BLOCK]
         ns, x = switch(whiten, noise, skip, jnp.concatenate([r[None], J]), ns, mb)
         r, J = x[0], x[1:]  # J: [P + 1, BLOCK], eta's row last
-        return k + 1, state, dstate, ns, sse + r @ r, H + J @ J.T, g + J @ r
+        sse = sse + fixed_order_sum(r * r)
+        H = H + fixed_order_sum(J[:, None] * J[None])
+        return k + 1, state, dstate, ns, sse, H, g + fixed_order_sum(J * r[None])
 
     carry = (
         jnp.asarray(0, jnp.int32),
@@ -410,23 +411,6 @@ def _fit_flat(
     return jax.vmap(fit)(rows, cases, max_steps, lam0, resume)
 
 
-def _fit_flat_sharded(rows, cases, max_steps, lam0, resume, **flags):
-    """`_fit_flat` with the rows split over the local devices; `flags`: its
-    `memory`, `table`, `feedback` and `whiten`."""
-    mesh = Mesh(np.asarray(jax.local_devices()), ("d",))
-    spec = PartitionSpec("d")
-    # `check_vma=False`: the per-device bodies are independent (no collectives);
-    # each device runs its own Levenberg-Marquardt loop to its own convergence.
-    fn = jax.shard_map(
-        ft.partial(_fit_flat, **flags),
-        mesh=mesh,
-        in_specs=(spec, spec, spec, spec, spec),
-        out_specs=spec,
-        check_vma=False,
-    )
-    return fn(rows, cases, max_steps, lam0, resume)
-
-
 # XLA's CPU back end compiles this program (~300 fusions, most of them small loop
 # bodies) about 40 % faster with its older loop emitters than with the fusion
 # emitters, and the batches run as fast (measured in
@@ -435,8 +419,9 @@ def _fit_flat_sharded(rows, cases, max_steps, lam0, resume, **flags):
 COMPILER_OPTIONS = {"xla_cpu_use_fusion_emitters": False}
 PROGRAMS = CompiledPrograms(
     {
-        name: jax.jit(fn, static_argnames=("memory", "table", "feedback", "whiten"))
-        for name, fn in (("one", _fit_flat), ("sharded", _fit_flat_sharded))
+        "one": jax.jit(
+            _fit_flat, static_argnames=("memory", "table", "feedback", "whiten")
+        )
     },
     compiler_options=COMPILER_OPTIONS,
 )
@@ -499,10 +484,13 @@ def fit_batch(
 
     With several devices (e.g. `XLA_FLAGS=--xla_force_host_platform_device_count=2`
     on a 2-core CPU, as `hamjax diagnose` sets) and `N` a multiple of their number,
-    the rows are split over them; the split changes only rounding. Budgets and
-    dampings are traced, so changing them does not recompile; the cost of a batch is
-    that of its longest-running row. `while_compiling` is called once the program
-    for these shapes is traced, if it has to be compiled (work to overlap with it).
+    the rows are split over them in equal shares, each share run by the same
+    one-device program (one compilation per device) and all at once: a row's fit
+    is bitwise the same on any number of devices (`_run_on_devices`). Budgets
+    and dampings are traced, so changing them does not recompile; the cost of a
+    batch is that of its longest-running row. `while_compiling` is called once the
+    program for these shapes is traced, if it has to be compiled (work to overlap
+    with it).
     `resume[i]`: row `i` continues a stopped fit exactly (its `theta0` and `lam0`
     the stopped fit's `theta` and `lam`, its budget one step more than it has
     left; `fitting.BatchedLevenbergMarquardt`); None: no row does.
@@ -518,11 +506,41 @@ def fit_batch(
         np.asarray(lam0, dtype=float),
         np.zeros(len(lam0), bool) if resume is None else np.asarray(resume, bool),
     )
-    n_dev = jax.local_device_count()  # this process's: cases split over processes
-    sharded = n_dev > 1 and rows.theta0.shape[0] % n_dev == 0
     flags = {"memory": memory, "table": table, "feedback": feedback, "whiten": whiten}
-    kind = "sharded" if sharded else "one"
-    return PROGRAMS.get(kind, args, flags, while_compiling)(*args)
+    devices = jax.local_devices()  # this process's: cases split over processes
+    if len(devices) == 1 or len(lam0) % len(devices):
+        return PROGRAMS.get("one", args, flags, while_compiling)(*args)
+    return _run_on_devices(args, flags, devices, while_compiling)
+
+
+def _run_on_devices(args, flags, devices, while_compiling) -> RowFit:
+    """`_fit_flat` of equal shares of the rows, share `i` on `devices[i]`, each
+    by the one-device program compiled for its device, dispatched together (they
+    run at once) and gathered on the host.
+
+    Not one program partitioned over the devices (`jax.shard_map`): XLA compiles
+    that differently (other fusions, so other fused multiply-adds), and a row came
+    out a few ulps apart on one device and on two, enough to change a name now and
+    then. The one-device program's lanes round alike at every batch width (the
+    reductions are `_linalg.fixed_order_sum`), so the split decides nothing.
+    The programs of the devices compile at the same time
+    (`CompiledPrograms.get_each`): one case cold (`HAMJAX_CACHE_DIR=off hamjax
+    diagnose`, 2 cores) took 8.5-8.9 s against 7.7-7.8 s with the partitioned
+    program, 10.6-11.2 s with the two compiled one after the other.
+    """
+    share = len(args[3]) // len(devices)
+    parts = [
+        jax.device_put(
+            jax.tree.map(
+                lambda x, i=i: np.asarray(x)[i * share : (i + 1) * share], args
+            ),
+            device,
+        )
+        for i, device in enumerate(devices)
+    ]
+    programs = PROGRAMS.get_each("one", parts, flags, while_compiling, devices)
+    runs = [program(*part) for program, part in zip(programs, parts, strict=True)]
+    return jax.tree.map(lambda *x: np.concatenate([np.asarray(y) for y in x]), *runs)
 
 
 # starts of the valve tried on the validation record, in each of
@@ -550,7 +568,7 @@ def _starts_on_validation(
                 p.at[start].set(d), b, a, tau, case.v_val, case, True, True, True
             )
         )(deltas)
-        sse = jnp.sum(case.m_val[None] * (runs - case.y_val[None]) ** 2, axis=-1)
+        sse = fixed_order_sum(case.m_val[None] * (runs - case.y_val[None]) ** 2)
         k = jnp.argmin(jnp.where(jnp.isfinite(sse), sse, jnp.inf))
         return deltas[k], runs[k]
 

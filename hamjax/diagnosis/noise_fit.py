@@ -22,6 +22,7 @@ import numpy as np
 from jaxtyping import Array, Bool, Float
 
 from .._filters import lfilter_numpy
+from .._linalg import fixed_order_sum
 from .effects.coloured_noise import (
     ar1_errors,
     fit_ar1,
@@ -70,7 +71,7 @@ def fit_noise_models(
     """The drift and coloured-noise predictors fitted on `r_est`, applied to
     `r_val`."""
     a = fit_ar1(r_est, m_est)
-    s_ar1 = jnp.sum(m_est * ar1_errors(r_est, a) ** 2)
+    s_ar1 = fixed_order_sum(m_est * ar1_errors(r_est, a) ** 2)
     alpha, s_drift, high, s_high = fit_split_local_level(r_est, m_est)
     d, s_frac = fit_fractional(r_est, m_est)
     is_level = s_high < s_ar1
@@ -220,8 +221,8 @@ def _lagged(x: Float[Array, " L"], k: int) -> Float[Array, " L"]:
 def _ar2(r: Float[Array, " L"], mask: Float[Array, " L"]) -> Float[Array, " 2"]:
     """Least-squares AR(2) coefficients (masked normal equations)."""
     x = jnp.stack([_lagged(r, 1), _lagged(r, 2)], axis=1) * mask[:, None]
-    g = x.T @ x + 1e-300 * jnp.eye(2)
-    return jnp.linalg.solve(g, x.T @ (mask * r))
+    g = fixed_order_sum(x.T[:, None] * x.T[None]) + 1e-300 * jnp.eye(2)
+    return jnp.linalg.solve(g, fixed_order_sum(x.T * (mask * r)[None]))
 
 
 def _inverse_ma(r: Float[Array, " L"], c: Float[Array, ""]) -> Float[Array, " L"]:
@@ -245,9 +246,10 @@ def _arma11(
     def one(c):
         rt = _inverse_ma(r, c)
         prev = _lagged(rt, 1)
-        a = jnp.sum(mask * rt * prev) / jnp.maximum(jnp.sum(mask * prev**2), 1e-300)
+        den = jnp.maximum(fixed_order_sum(mask * prev**2), 1e-300)
+        a = fixed_order_sum(mask * rt * prev) / den
         a = jnp.clip(a, -0.999, 0.999)
-        return a, jnp.sum(mask * (rt - a * prev) ** 2)
+        return a, fixed_order_sum(mask * (rt - a * prev) ** 2)
 
     a, sse = jax.vmap(one)(cs)
     k = jnp.argmin(sse)

@@ -22,7 +22,7 @@ import jax.numpy as jnp
 import optimistix as optx
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
-from .._linalg import cholesky_solve
+from .._linalg import cholesky_solve, fixed_order_sum
 from .._results import RESULTS
 
 
@@ -126,7 +126,7 @@ def _batched_lm(normal, solver, theta0, args, max_steps, prior):
             cost_n = sse_n
         else:
             w, mask = prior.weight, prior.mask
-            cost_n = sse_n + w * jnp.sum(jnp.where(mask, trial, 0.0) ** 2)
+            cost_n = sse_n + w * fixed_order_sum(jnp.where(mask, trial, 0.0) ** 2)
         better = cost_n < cost
         small = ((cost - cost_n) <= solver.rtol * cost_n) & (
             lam <= solver.lam_converged

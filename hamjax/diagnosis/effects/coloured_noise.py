@@ -33,6 +33,7 @@ import numpy as np
 from jaxtyping import Array, Float
 from scipy import signal
 
+from ..._linalg import fixed_order_sum
 from ._base import AbstractEffect
 
 
@@ -47,7 +48,8 @@ def ar1_errors(
 def fit_ar1(r: Float[Array, " time"], mask: Float[Array, " time"]) -> Float[Array, ""]:
     """Least-squares AR(1) coefficient on the masked residual, clipped to $[0, 0.999]$."""
     prev = jnp.concatenate([jnp.zeros(1, r.dtype), r[:-1]])
-    a = jnp.sum(mask * r * prev) / jnp.maximum(jnp.sum(mask * prev**2), 1e-300)
+    den = jnp.maximum(fixed_order_sum(mask * prev**2), 1e-300)
+    a = fixed_order_sum(mask * r * prev) / den
     return jnp.clip(a, 0.0, 0.999)
 
 
@@ -93,7 +95,9 @@ def fit_fractional(
 ) -> tuple[Array, Array]:
     """The order $d$ of least masked one-step SSE on the grid over $(0, 1)$, and
     that SSE: `(d, sse)`."""
-    sse = jax.vmap(lambda d: jnp.sum(mask * fractional_errors(r, d) ** 2))(_orders())
+    sse = jax.vmap(lambda d: fixed_order_sum(mask * fractional_errors(r, d) ** 2))(
+        _orders()
+    )
     i = jnp.argmin(sse)
     return _orders()[i], sse[i]
 

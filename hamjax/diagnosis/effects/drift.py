@@ -26,6 +26,7 @@ import jax.lax as lax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
+from ..._linalg import fixed_order_sum
 from ._base import AbstractEffect
 
 
@@ -55,7 +56,9 @@ MAX_DRIFT_GAIN = 0.5  # module docstring: the white part at least half the innov
 
 def _level_sse(r: Float[Array, " time"], mask: Float[Array, " time"]) -> Array:
     """The masked prediction-error energy at each gain of the grid."""
-    return jax.vmap(lambda a: jnp.sum(mask * local_level_errors(r, a) ** 2))(_alphas())
+    return jax.vmap(lambda a: fixed_order_sum(mask * local_level_errors(r, a) ** 2))(
+        _alphas()
+    )
 
 
 def fit_local_level(

@@ -1,12 +1,23 @@
 """Shared test helpers."""
 
 import importlib.util
+import platform
 import sys
 from pathlib import Path
 
 import jax.tree_util as jtu
 import numpy as np
+import pytest
 from scipy import signal
+
+
+# Bitwise equality across batch widths and device counts rests on the ISA cap
+# (`hamjax._runtime.same_rounding_in_every_lane`, which conftest applies), and the
+# cap exists on x86-64 only: other CPUs always fuse multiply-adds.
+CAPPED = platform.machine().lower() in ("x86_64", "amd64")
+needs_isa_cap = pytest.mark.skipif(
+    not CAPPED, reason="bitwise only under the ISA cap, which is x86-64's"
+)
 
 
 def tree_allclose(x, y, *, rtol=1e-10, atol=1e-12) -> bool:

@@ -6,6 +6,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from helpers import needs_isa_cap
 
 from hamjax._linalg import cholesky_solve, fixed_order_sum, polymul
 
@@ -91,6 +92,7 @@ def test_fixed_order_sum_matches_math_fsum(n):
         assert abs(s - math.fsum(row)) <= bound
 
 
+@needs_isa_cap
 def test_fixed_order_sum_of_a_row_does_not_depend_on_its_batch():
     """The property it exists for: a row's sum bitwise the same whatever rows share
     its vmapped batch (widths 1-32, as other device counts and chunk sizes cut a

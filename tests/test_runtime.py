@@ -1,6 +1,7 @@
 """Process-wide runtime settings: the on-disk compilation cache, the ISA cap."""
 
 import jax
+from helpers import needs_isa_cap
 
 from hamjax._runtime import use_compilation_cache
 
@@ -23,6 +24,7 @@ def test_compilation_cache_folder_and_opt_out(tmp_path, monkeypatch):
         jax.config.update("jax_compilation_cache_dir", before)
 
 
+@needs_isa_cap
 def test_every_lane_of_a_batched_filter_rounds_alike():
     """A row's result must not depend on where in a batch it runs (so a case's
     diagnosis on which other cases share its call): 16 direct-form filters of
@@ -55,6 +57,7 @@ def test_every_lane_of_a_batched_filter_rounds_alike():
             np.testing.assert_array_equal(np.asarray(run(b[at], a[at], u[at])), y[at])
 
 
+@needs_isa_cap
 def test_a_nonlinear_recursion_rounds_alike_at_every_batch_width():
     """A recursion with a multiply-add around a `tanh` (as the friction loop's),
     vmapped over 160 lanes, each lane bitwise the same at batch widths 1-160.

@@ -123,8 +123,12 @@ def by_direction(r, v, floor) -> dict:
         }
     n1, n2 = out["rising"]["n"], out["falling"]["n"]
     if n1 > 1 and n2 > 1:
-        # effective sample size shrunk by the lag-1 autocorrelation of r
-        rho = float(np.clip(np.corrcoef(r[:-1], r[1:])[0, 1], 0, 0.999))
+        # effective sample size shrunk by the lag-1 autocorrelation of r (none
+        # for a residual without variance, e.g. an exact noise-free fit's)
+        a, b = r[:-1], r[1:]
+        rho = 0.0
+        if np.std(a) > 0 and np.std(b) > 0:
+            rho = float(np.clip(np.corrcoef(a, b)[0, 1], 0, 0.999))
         eff = (1 - rho) / (1 + rho)
         se = floor * math.sqrt(1 / (n1 * eff) + 1 / (n2 * eff))
         diff = out["rising"]["mean"] - out["falling"]["mean"]

@@ -1,10 +1,11 @@
-"""`locate`'s input levels and what the report says of a two-level record."""
+"""`locate`'s input levels, its direction test on a residual without variance, and
+what the report says of a two-level record."""
 
 from types import SimpleNamespace
 
 import numpy as np
 
-from hamjax.diagnosis.locate import LEVELS_COUNTED, input_levels, locate
+from hamjax.diagnosis.locate import LEVELS_COUNTED, by_direction, input_levels, locate
 from hamjax.diagnosis.report import report_markdown
 
 
@@ -18,6 +19,19 @@ def test_input_levels_counts_distinct_values_to_rounding():
     assert input_levels(np.repeat([0.0, 1.0, 2.0], 10)) == 3
     multisine = np.sin(0.1 * np.arange(500)) + 0.5 * np.sin(0.37 * np.arange(500))
     assert input_levels(multisine) == LEVELS_COUNTED
+
+
+def test_direction_test_of_a_residual_without_variance():
+    # an exact noise-free fit leaves a constant (here zero) residual: no
+    # autocorrelation to estimate (np.corrcoef would divide 0 by 0), no difference
+    v = np.repeat([0.0, 1.0, -1.0, 0.5], 25)
+    for r in (np.zeros(100), np.full(100, 0.25)):  # exact means
+        out = by_direction(r, v, floor=0.1)
+        assert out["difference"] == 0.0 and out["z"] == 0.0
+        assert not out["significant"]
+    # and a residual that differs by direction still gives its z
+    r = 0.25 * (v > 0) + 0.01 * np.random.default_rng(0).standard_normal(100)
+    assert by_direction(r, v, floor=0.1)["z"] > 0.0
 
 
 def _diagnosis(v_est, v_val):

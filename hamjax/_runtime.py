@@ -40,9 +40,12 @@ def same_rounding_in_every_lane() -> None:
       of seed 3's 40 sticky loops not bitwise the same on one device and on two,
       at AVX2).
     Without FMA every operation rounds once wherever XLA puts it; with the
-    reductions in a fixed order (`_linalg.fixed_order_sum`) the 40 loops are
-    bitwise the same on one device and on two (tested: `tests/test_runtime.py`),
-    at the same speed (104 s against 101-104 s at AVX2, 2 devices). Applied where
+    reductions in a fixed order (`_linalg.fixed_order_sum`) and one program per
+    device (`diagnosis.fit._run_on_devices`) the 40 loops are bitwise the same on
+    one device and on two (the pieces are tested in `tests/test_runtime.py`,
+    `tests/test_linalg.py` and the two-device fit test). The cap costs little:
+    240 family-B cases in one call 100.9 and 97.6 s at AVX2 against 104.5 and
+    100.4 s at AVX (2 cores, cache off, alternating). Applied where
     cases are diagnosed (`hamjax diagnose`, `demo` and the studies that
     diagnose), not to the Monte Carlo simulations, which a cap slowed by about a
     fifth (`benchmark_throughput.py --quick`) and whose results are continuous.

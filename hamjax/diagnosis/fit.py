@@ -519,10 +519,11 @@ def _run_on_devices(args, flags, devices, while_compiling) -> RowFit:
     run at once) and gathered on the host.
 
     Not one program partitioned over the devices (`jax.shard_map`): XLA compiles
-    that differently (other fusions, so other fused multiply-adds), and a row came
-    out a few ulps apart on one device and on two, enough to change a name now and
-    then. The one-device program's lanes round alike at every batch width (the
-    reductions are `_linalg.fixed_order_sum`), so the split decides nothing.
+    that with other fusions (519 against 513 for one fit program), and even
+    without fused multiply-adds (`_runtime.same_rounding_in_every_lane`) a row's
+    simulated output came out 1 ulp apart on one device and on two. The
+    one-device program's lanes round alike at every batch width (the reductions
+    are `_linalg.fixed_order_sum`), so the split decides nothing.
     The programs of the devices compile at the same time
     (`CompiledPrograms.get_each`): one case cold (`HAMJAX_CACHE_DIR=off hamjax
     diagnose`, 2 cores) took 8.5-8.9 s against 7.7-7.8 s with the partitioned

@@ -53,8 +53,13 @@ def same_rounding_in_every_lane() -> None:
     `XLA_FLAGS=--xla_cpu_max_isa=...` to choose otherwise. Other platforms: a
     no-op (there a fit may round differently at another batch width).
     """
-    if platform.machine().lower() in ("x86_64", "amd64"):
+    if has_isa_cap():
         _add_xla_flag(_ISA_FLAG)
+
+
+def has_isa_cap() -> bool:
+    """Whether this CPU is one `same_rounding_in_every_lane` caps (x86-64)."""
+    return platform.machine().lower() in ("x86_64", "amd64")
 
 
 def _add_xla_flag(flag: str) -> None:

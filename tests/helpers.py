@@ -1,7 +1,6 @@
 """Shared test helpers."""
 
 import importlib.util
-import platform
 import sys
 from pathlib import Path
 
@@ -10,11 +9,13 @@ import numpy as np
 import pytest
 from scipy import signal
 
+from hamjax._runtime import has_isa_cap
+
 
 # Bitwise equality across batch widths and device counts rests on the ISA cap
 # (`hamjax._runtime.same_rounding_in_every_lane`, which conftest applies), and the
 # cap exists on x86-64 only: other CPUs always fuse multiply-adds.
-CAPPED = platform.machine().lower() in ("x86_64", "amd64")
+CAPPED = has_isa_cap()
 needs_isa_cap = pytest.mark.skipif(
     not CAPPED, reason="bitwise only under the ISA cap, which is x86-64's"
 )

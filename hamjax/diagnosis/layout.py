@@ -39,6 +39,7 @@ from .augmented import (
     effect_scales,
     numerator_slots,
     raw_from_physical,
+    slot_index,
     slot_names,
 )
 from .effects import (
@@ -1407,7 +1408,7 @@ def refits_linear(row: Row) -> bool:
 def frees_valve_start(row: Row) -> bool:
     """Whether the row fits the valve's start (`valve_start`: the stick-slip
     profile's starts)."""
-    return bool(np.asarray(row.free)[slot_names(N_MAX).index("valve_start")])
+    return bool(np.asarray(row.free)[slot_index("valve_start", N_MAX)])
 
 
 def starts_at_nominal_numerator(row: Row) -> bool:
